@@ -1,0 +1,2 @@
+def main():
+    raise SystemExit("lessmimic: CLI not built yet")

@@ -1,0 +1,142 @@
+"""Object geometry references shared by scenes, clips and (later) distance fields.
+
+An object is one of:
+
+* :class:`Primitive` -- box, cylinder, sphere or capsule, with MuJoCo's size
+  convention (box: half-extents ``(hx, hy, hz)``; sphere: ``(r,)``; cylinder and
+  capsule: ``(r, half_length)`` along local z) and a per-axis ``scale`` applied in
+  the object frame, ``x_scaled = diag(scale) @ x``;
+* :class:`MeshGeometry` -- a triangle mesh file read by trimesh, with per-axis scale;
+* :class:`Chair` -- a composite of boxes (seat, back, four legs) parameterised by
+  seat height. Its frame sits on the floor under the seat centre, +x facing forward
+  (away from the back), z up.
+
+Geometry is pure data; :mod:`pipeline.scene` turns it into MuJoCo geoms.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+PrimitiveKind = Literal["box", "cylinder", "sphere", "capsule"]
+_SIZE_LEN = {"box": 3, "sphere": 1, "cylinder": 2, "capsule": 2}
+
+
+def _scale3(scale) -> tuple[float, float, float]:
+    s = tuple(float(v) for v in np.broadcast_to(np.asarray(scale, dtype=float), (3,)))
+    if not all(np.isfinite(s)) or min(s) <= 0:
+        raise ValueError(f"scale must be three positive finite numbers, got {scale!r}")
+    return s  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class Primitive:
+    kind: PrimitiveKind
+    size: tuple[float, ...]
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+
+    def __post_init__(self):
+        if self.kind not in _SIZE_LEN:
+            raise ValueError(f"primitive kind must be one of {sorted(_SIZE_LEN)}, got {self.kind!r}")
+        size = tuple(float(v) for v in self.size)
+        if len(size) != _SIZE_LEN[self.kind] or not all(np.isfinite(size)) or min(size) <= 0:
+            raise ValueError(f"{self.kind} size must be {_SIZE_LEN[self.kind]} positive numbers, got {self.size!r}")
+        object.__setattr__(self, "size", size)
+        object.__setattr__(self, "scale", _scale3(self.scale))
+
+    @property
+    def half_extents(self) -> np.ndarray:
+        """Half-extents of the scaled object's axis-aligned bounding box in its own frame."""
+        s = self.size
+        base = {"box": s, "sphere": (s[0],) * 3, "cylinder": (s[0], s[0], s[1]), "capsule": (s[0], s[0], s[1] + s[0])}
+        return np.asarray(base[self.kind]) * np.asarray(self.scale)
+
+    def scaled(self, factor) -> "Primitive":
+        return Primitive(self.kind, self.size, tuple(np.asarray(self.scale) * np.broadcast_to(factor, (3,))))
+
+
+@dataclass(frozen=True)
+class MeshGeometry:
+    """A mesh file. ``collision`` says how the physics sees it: ``"hull"`` (one convex
+    hull, exact for convex objects such as OMOMO's boxes) or ``"decomposition"``
+    (approximate convex decomposition, for concave objects such as tables and chairs)."""
+
+    path: str
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    collision: Literal["hull", "decomposition"] = "hull"
+
+    def __post_init__(self):
+        object.__setattr__(self, "path", str(Path(self.path)))
+        object.__setattr__(self, "scale", _scale3(self.scale))
+        if self.collision not in ("hull", "decomposition"):
+            raise ValueError(f"mesh collision must be 'hull' or 'decomposition', got {self.collision!r}")
+
+    def scaled(self, factor) -> "MeshGeometry":
+        return MeshGeometry(self.path, tuple(np.asarray(self.scale) * np.broadcast_to(factor, (3,))), self.collision)
+
+
+@dataclass(frozen=True)
+class Chair:
+    """Seat (a box whose top is at ``seat_height``), a back behind it, four legs."""
+
+    seat_height: float = 0.45
+    seat_width: float = 0.45
+    seat_depth: float = 0.42
+    seat_thickness: float = 0.04
+    back_height: float = 0.40
+    back_thickness: float = 0.04
+    leg_width: float = 0.04
+
+    def __post_init__(self):
+        for name, v in self.__dict__.items():
+            if not np.isfinite(v) or v <= 0:
+                raise ValueError(f"chair {name} must be positive, got {v!r}")
+        if self.seat_height <= self.seat_thickness:
+            raise ValueError(f"chair seat_height {self.seat_height} must exceed seat_thickness {self.seat_thickness}")
+
+    def parts(self) -> list[tuple[str, Primitive, np.ndarray]]:
+        """(name, box, centre in the chair frame) for each part."""
+        hw, hd, t = self.seat_width / 2, self.seat_depth / 2, self.seat_thickness
+        leg_h = self.seat_height - t
+        lw = self.leg_width / 2
+        parts = [
+            ("seat", Primitive("box", (hd, hw, t / 2)), np.array([0.0, 0.0, self.seat_height - t / 2])),
+            (
+                "back",
+                Primitive("box", (self.back_thickness / 2, hw, self.back_height / 2)),
+                np.array([-hd + self.back_thickness / 2, 0.0, self.seat_height + self.back_height / 2]),
+            ),
+        ]
+        for i, (sx, sy) in enumerate([(1, 1), (1, -1), (-1, 1), (-1, -1)]):
+            parts.append(
+                (f"leg{i}", Primitive("box", (lw, lw, leg_h / 2)), np.array([sx * (hd - lw), sy * (hw - lw), leg_h / 2]))
+            )
+        return parts
+
+
+ObjectGeometry = Primitive | MeshGeometry | Chair
+
+
+def geometry_to_dict(g: ObjectGeometry) -> dict:
+    """Plain-JSON description (for dataset cards and episode metadata)."""
+    kind = {Primitive: "primitive", MeshGeometry: "mesh", Chair: "chair"}[type(g)]
+    return {"type": kind, **{k: (list(v) if isinstance(v, tuple) else v) for k, v in g.__dict__.items()}}
+
+
+def geometry_from_dict(d: dict) -> ObjectGeometry:
+    d = dict(d)
+    cls = {"primitive": Primitive, "mesh": MeshGeometry, "chair": Chair}[d.pop("type")]
+    return cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()})
+
+
+@dataclass(frozen=True)
+class ObjectPhysics:
+    """Physical properties an object gets in a scene (later stages randomise them)."""
+
+    mass: float = 2.0
+    friction: float = 0.8
+    restitution: float = 0.0

@@ -1,0 +1,39 @@
+"""Quaternion helpers. The project's convention is MuJoCo's: scalar first, ``wxyz``.
+
+scipy's ``Rotation`` uses scalar-last ``xyzw``; these two functions are the only
+places the order is switched.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+
+def xyzw_to_wxyz(q: np.ndarray) -> np.ndarray:
+    q = np.asarray(q)
+    return np.concatenate([q[..., 3:4], q[..., 0:3]], axis=-1)
+
+
+def wxyz_to_xyzw(q: np.ndarray) -> np.ndarray:
+    q = np.asarray(q)
+    return np.concatenate([q[..., 1:4], q[..., 0:1]], axis=-1)
+
+
+def rotation_from_wxyz(q: np.ndarray) -> Rotation:
+    return Rotation.from_quat(wxyz_to_xyzw(np.asarray(q, dtype=np.float64).reshape(-1, 4)))
+
+
+def wxyz_from_rotation(r: Rotation) -> np.ndarray:
+    """Unit quaternions with a non-negative scalar part (one of the two covers, chosen canonically)."""
+    q = xyzw_to_wxyz(r.as_quat())
+    return np.where(q[..., :1] < 0, -q, q)
+
+
+def slerp_wxyz(times: np.ndarray, q: np.ndarray, new_times: np.ndarray) -> np.ndarray:
+    """Spherical linear interpolation of a (T,4) wxyz track at ``new_times`` (inside ``times``)."""
+    return wxyz_from_rotation(Slerp(times, rotation_from_wxyz(q))(new_times))
+
+
+# Rotation taking a y-up frame to a z-up one: +90 deg about x (y -> z, z -> -y).
+Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
