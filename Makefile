@@ -8,8 +8,7 @@ PY     := $(VENV)/bin/python
 CLI    := $(VENV)/bin/lessmimic
 NAME   ?= default
 INPUT  ?=
-JOBS   ?= 1
-STAGE_ARGS = --name $(NAME) $(if $(INPUT),--input $(INPUT)) $(if $(OVERWRITE),--overwrite) -j $(JOBS)
+STAGE_ARGS = --name $(NAME) $(if $(INPUT),--input $(INPUT)) $(if $(OVERWRITE),--overwrite)
 
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false

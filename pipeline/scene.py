@@ -1,0 +1,206 @@
+"""MuJoCo scenes built with ``MjSpec``: the G1, its actuators, a floor and any objects.
+
+One scene builder serves every stage, so the retarget stage's penetration checks and
+the physics stage's contacts see the same collision model:
+
+* robot collision geoms are mjlab's ``FULL_COLLISION`` set: every ``*_collision`` geom
+  collides (self-collision included); foot capsules have ``condim 3``, ``priority 1``,
+  friction 0.6; the others ``condim 1``; visual meshes never collide;
+* objects are free bodies (or fixed ones) with ``priority 2``, so their own friction and
+  restitution govern their contacts with the robot and the floor;
+* restitution ``e`` maps to MuJoCo's contact damping ratio through the damped-oscillator
+  relation ``e = exp(-zeta pi / sqrt(1 - zeta^2))``, i.e.
+  ``zeta = -ln e / sqrt(pi^2 + ln^2 e)`` (``e = 0`` gives critical damping, ``zeta = 1``),
+  with ``solref = (0.02, zeta)``;
+* mesh objects collide through :func:`pipeline.collision_mesh.collision_parts` (convex hull or
+  CoACD decomposition) and are drawn with the original mesh; a primitive with a
+  non-uniform scale becomes the exact shape MuJoCo has (box half-extents, an ellipsoid)
+  or, for cylinders and capsules, a convex mesh of the scaled shape;
+* the object's mass is spread over its collision pieces in proportion to their volume.
+
+Physics runs at 200 Hz (``timestep 0.005``) with the ``implicitfast`` integrator.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+import trimesh
+
+from pipeline.collision_mesh import collision_parts, load_mesh
+from pipeline.geometry import Chair, MeshGeometry, ObjectGeometry, ObjectPhysics, Primitive
+from pipeline.robot import G1_JOINT_NAMES, ActuatorProfile, actuator_profile, g1_xml_path
+
+PHYSICS_TIMESTEP = 0.005
+OBJECT_PRIORITY = 2
+_FOOT_PREFIXES = tuple(f"{s}_foot" for s in ("left", "right"))
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    """An object placed in a scene: geometry, physical properties, initial pose (x y z qw qx qy qz)."""
+
+    name: str
+    geometry: ObjectGeometry
+    physics: ObjectPhysics = ObjectPhysics()
+    pose: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+    fixed: bool = False
+
+
+@dataclass
+class Scene:
+    """A compiled scene: the model plus where the robot and each object live in ``qpos``."""
+
+    model: mujoco.MjModel
+    spec: mujoco.MjSpec
+    profile: ActuatorProfile
+    objects: tuple[SceneObject, ...]
+    object_qpos_adr: dict[str, int] = field(default_factory=dict)
+    object_body_id: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def robot_geom_ids(self) -> np.ndarray:
+        """Ids of the robot's collision geoms."""
+        m = self.model
+        return np.array([g for g in range(m.ngeom) if m.geom_contype[g] and m.body_rootid[m.geom_bodyid[g]] == m.body("pelvis").id])
+
+
+def restitution_damping_ratio(e: float) -> float:
+    """Contact damping ratio giving a coefficient of restitution ``e`` in [0, 1)."""
+    if not 0.0 <= e < 1.0:
+        raise ValueError(f"restitution must be in [0, 1), got {e}")
+    if e == 0.0:
+        return 1.0
+    le = math.log(e)
+    return -le / math.sqrt(math.pi**2 + le**2)
+
+
+def _apply_robot_collisions(spec: mujoco.MjSpec) -> None:
+    for g in spec.geoms:
+        if not g.name.endswith("_collision"):
+            continue
+        g.contype, g.conaffinity = 1, 1
+        if g.name.startswith(_FOOT_PREFIXES):
+            g.condim, g.priority, g.friction = 3, 1, [0.6, 0.005, 0.0001]
+        else:
+            g.condim, g.priority = 1, 0
+
+
+def _add_actuators(spec: mujoco.MjSpec, profile: ActuatorProfile) -> None:
+    for i, name in enumerate(G1_JOINT_NAMES):
+        spec.joint(name).armature = float(profile.armature[i])
+        act = spec.add_actuator(name=name.removesuffix("_joint"), target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act.set_to_position(kp=float(profile.kp[i]), kv=float(profile.kd[i]))
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.forcerange = [-float(profile.effort_limit[i]), float(profile.effort_limit[i])]
+
+
+def _primitive_pieces(p: Primitive) -> list[tuple[str, object]]:
+    """[(mujoco geom type name, size or trimesh)] for a scaled primitive."""
+    s = np.asarray(p.scale)
+    uniform = np.allclose(s, s[0])
+    if p.kind == "box":
+        return [("box", np.asarray(p.size) * s)]
+    if p.kind == "sphere":
+        return [("sphere", [p.size[0] * s[0]])] if uniform else [("ellipsoid", p.size[0] * s)]
+    if uniform or (p.kind == "cylinder" and s[0] == s[1]):
+        r, h = p.size[0] * s[0], p.size[1] * s[2]
+        return [(p.kind, [r, h])]
+    base = (trimesh.creation.cylinder(p.size[0], 2 * p.size[1], sections=48) if p.kind == "cylinder"
+            else trimesh.creation.capsule(2 * p.size[1], p.size[0], count=[24, 24]))  # fmt: skip
+    base.apply_scale(s)
+    return [("mesh", base)]
+
+
+def _add_mesh_geom(spec, body, name: str, mesh: trimesh.Trimesh, *, collide: bool, scale=(1.0, 1.0, 1.0)):
+    m = spec.add_mesh(name=name)
+    m.uservert = np.asarray(mesh.vertices, dtype=np.float32).ravel().tolist()
+    m.userface = np.asarray(mesh.faces, dtype=np.int32).ravel().tolist()
+    m.scale = list(scale)
+    if not collide:
+        m.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL
+    return body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name)
+
+
+def _add_object(spec: mujoco.MjSpec, obj: SceneObject) -> None:
+    body = spec.worldbody.add_body(name=obj.name, pos=list(obj.pose[:3]), quat=list(obj.pose[3:7]))
+    if not obj.fixed:
+        body.add_freejoint(name=f"{obj.name}_free")
+    geo, phys = obj.geometry, obj.physics
+    collide: list[tuple[mujoco.MjsGeom, float]] = []  # (geom, volume)
+    if isinstance(geo, Primitive):
+        for k, (kind, size) in enumerate(_primitive_pieces(geo)):
+            if kind == "mesh":
+                collide.append((_add_mesh_geom(spec, body, f"{obj.name}_col{k}", size, collide=True), size.volume))
+            else:
+                g = body.add_geom(name=f"{obj.name}_col{k}", type=getattr(mujoco.mjtGeom, f"mjGEOM_{kind.upper()}"), size=list(size) + [0.0] * (3 - len(size)))
+                collide.append((g, _volume(kind, size)))
+    elif isinstance(geo, Chair):
+        for part, box, centre in geo.parts():
+            g = body.add_geom(name=f"{obj.name}_{part}", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(box.size), pos=centre.tolist())
+            collide.append((g, float(np.prod(box.size)) * 8))
+    elif isinstance(geo, MeshGeometry):
+        visual = _add_mesh_geom(spec, body, f"{obj.name}_visual", load_mesh(geo.path), collide=False, scale=geo.scale)
+        visual.contype = visual.conaffinity = 0
+        visual.group, visual.mass = 2, 0.0
+        for k, piece in enumerate(collision_parts(geo)):
+            g = _add_mesh_geom(spec, body, f"{obj.name}_col{k}", piece, collide=True, scale=geo.scale)
+            g.group = 3
+            collide.append((g, abs(piece.volume) * float(np.prod(geo.scale))))
+    else:
+        raise TypeError(f"object {obj.name}: unsupported geometry {type(geo).__name__}")
+    total = sum(v for _, v in collide)
+    zeta = restitution_damping_ratio(phys.restitution)
+    for g, vol in collide:
+        g.contype = g.conaffinity = 1
+        g.condim, g.priority = 3, OBJECT_PRIORITY
+        g.friction = [phys.friction, 0.005, 0.0001]
+        g.solref = [0.02, zeta]
+        g.mass = phys.mass * vol / total
+        g.rgba = [0.8, 0.5, 0.2, 1.0]
+
+
+def _volume(kind: str, size) -> float:
+    if kind == "box":
+        return 8.0 * float(np.prod(size))
+    if kind == "sphere":
+        return 4.0 / 3.0 * math.pi * size[0] ** 3
+    if kind == "ellipsoid":
+        return 4.0 / 3.0 * math.pi * float(np.prod(size))
+    r, h = size[0], size[1]
+    return math.pi * r * r * 2 * h + (4.0 / 3.0 * math.pi * r**3 if kind == "capsule" else 0.0)
+
+
+def build_spec(objects: tuple[SceneObject, ...] | list[SceneObject] = (), profile: str | ActuatorProfile = "mjlab") -> mujoco.MjSpec:
+    """G1 + actuators of ``profile`` + floor + ``objects``, as an editable ``MjSpec``."""
+    profile = actuator_profile(profile) if isinstance(profile, str) else profile
+    names = [o.name for o in objects]
+    if len(set(names)) != len(names):
+        raise ValueError(f"object names must be unique, got {names}")
+    spec = mujoco.MjSpec.from_file(str(g1_xml_path()))
+    spec.option.timestep = PHYSICS_TIMESTEP
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    _apply_robot_collisions(spec)
+    _add_actuators(spec, profile)
+    floor = spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05])
+    floor.contype = floor.conaffinity = 1
+    floor.condim, floor.friction = 3, [1.0, 0.005, 0.0001]
+    for obj in objects:
+        _add_object(spec, obj)
+    return spec
+
+
+def build_scene(objects: tuple[SceneObject, ...] | list[SceneObject] = (), profile: str | ActuatorProfile = "mjlab") -> Scene:
+    """Compile :func:`build_spec` and record each object's ``qpos`` address and body id."""
+    profile = actuator_profile(profile) if isinstance(profile, str) else profile
+    spec = build_spec(objects, profile)
+    model = spec.compile()
+    scene = Scene(model=model, spec=spec, profile=profile, objects=tuple(objects))
+    for o in objects:
+        scene.object_body_id[o.name] = model.body(o.name).id
+        if not o.fixed:
+            scene.object_qpos_adr[o.name] = int(model.jnt_qposadr[model.joint(f"{o.name}_free").id])
+    return scene

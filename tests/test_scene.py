@@ -1,0 +1,145 @@
+"""Scenes: robot actuators and collision set, objects of every geometry kind, physics properties."""
+
+import math
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from pipeline.errors import InputError
+from pipeline.geometry import Chair, MeshGeometry, ObjectPhysics, Primitive
+from pipeline.robot import G1_JOINT_NAMES, actuator_profile
+from pipeline.scene import Scene, SceneObject, build_scene, restitution_damping_ratio
+from tests.mocap_paths import SHARED_MOCAP, needs_shared
+
+
+def _settle(scene: Scene, seconds: float = 1.0) -> mujoco.MjData:
+    d = mujoco.MjData(scene.model)
+    for o in scene.objects:
+        if not o.fixed:
+            a = scene.object_qpos_adr[o.name]
+            d.qpos[a : a + 7] = o.pose
+    d.qpos[:3] = (-5, 0, 0.8)  # robot far away
+    for _ in range(int(seconds / scene.model.opt.timestep)):
+        mujoco.mj_step(scene.model, d)
+    return d
+
+
+def test_robot_actuators_follow_profile():
+    for name in ("mjlab", "lessmimic_demo"):
+        s = build_scene(profile=name)
+        prof = actuator_profile(name)
+        m = s.model
+        assert m.nu == 29 and m.opt.timestep == 0.005
+        for i, j in enumerate(G1_JOINT_NAMES):
+            a = m.actuator(j.removesuffix("_joint"))
+            assert m.actuator_trnid[a.id, 0] == m.joint(j).id
+            assert m.actuator_gainprm[a.id, 0] == pytest.approx(prof.kp[i])
+            assert m.actuator_biasprm[a.id, 2] == pytest.approx(-prof.kd[i])
+            assert m.actuator_forcerange[a.id, 1] == pytest.approx(prof.effort_limit[i])
+            assert m.dof_armature[m.jnt_dofadr[m.joint(j).id]] == pytest.approx(prof.armature[i])
+
+
+def test_robot_collision_set_is_mjlab_full_collision():
+    m = build_scene().model
+    for g in range(m.ngeom):
+        name = m.geom(g).name
+        if name.endswith("_collision"):
+            assert m.geom_contype[g] == 1 and m.geom_conaffinity[g] == 1
+            assert m.geom_condim[g] == (3 if "_foot" in name else 1)
+        elif m.geom_bodyid[g] != 0:
+            assert m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0, name
+
+
+def test_pd_hold_torque_equals_profile():
+    s = build_scene()
+    d = mujoco.MjData(s.model)
+    d.qpos[:7] = (0, 0, 2.0, 1, 0, 0, 0)
+    d.ctrl[:] = 0.1
+    mujoco.mj_forward(s.model, d)
+    prof = actuator_profile("mjlab")
+    np.testing.assert_allclose(d.actuator_force, prof.torque(np.full(29, 0.1), d.qpos[7:], d.qvel[6:]))
+
+
+@pytest.mark.parametrize(
+    "geometry, rest_height",
+    [
+        (Primitive("box", (0.2, 0.15, 0.1), scale=(1.0, 1.0, 2.0)), 0.2),
+        (Primitive("sphere", (0.1,), scale=(1.0, 1.0, 1.5)), 0.15),  # ellipsoid
+        (Primitive("cylinder", (0.1, 0.2)), 0.2),
+        (Primitive("cylinder", (0.1, 0.2), scale=(2.0, 1.0, 0.5)), 0.1),  # elliptic: convex mesh
+        (Primitive("capsule", (0.05, 0.1), scale=(1.0, 1.0, 1.0)), 0.15),
+    ],
+)
+def test_primitive_rests_on_floor_at_its_scaled_half_height(geometry, rest_height):
+    obj = SceneObject("obj", geometry, ObjectPhysics(mass=3.0), pose=(0, 0, rest_height + 0.05, 1, 0, 0, 0))
+    s = build_scene([obj])
+    d = _settle(s)
+    assert s.model.body_mass[s.object_body_id["obj"]] == pytest.approx(3.0)
+    assert d.xpos[s.object_body_id["obj"], 2] == pytest.approx(rest_height, abs=3e-3)
+
+
+def test_chair_seat_top_at_seat_height():
+    chair = Chair(seat_height=0.52)
+    s = build_scene([SceneObject("chair", chair, fixed=True)])
+    m = s.model
+    seat = m.geom("chair_seat")
+    top = m.geom_pos[seat.id, 2] + m.geom_size[seat.id, 2]
+    assert top == pytest.approx(0.52)
+    names = {m.geom(g).name for g in range(m.ngeom) if m.geom_bodyid[g] == s.object_body_id["chair"]}
+    assert names == {"chair_seat", "chair_back", "chair_leg0", "chair_leg1", "chair_leg2", "chair_leg3"}
+
+
+def test_restitution_bounce_height():
+    """A ball dropped from 0.5 m rebounds to about e^2 * 0.5 m."""
+    heights = {}
+    for e in (0.0, 0.6):
+        obj = SceneObject("ball", Primitive("sphere", (0.05,)), ObjectPhysics(mass=0.5, restitution=e), pose=(0, 0, 0.55, 1, 0, 0, 0))
+        s = build_scene([obj])
+        d = mujoco.MjData(s.model)
+        d.qpos[:3] = (-5, 0, 0.8)
+        a = s.object_qpos_adr["ball"]
+        d.qpos[a : a + 7] = obj.pose
+        zs, falling_done = [], False
+        for _ in range(400):
+            mujoco.mj_step(s.model, d)
+            v = d.qvel[s.model.jnt_dofadr[s.model.joint("ball_free").id] + 2]
+            falling_done |= v > 0
+            if falling_done:
+                zs.append(d.qpos[a + 2])
+        heights[e] = max(zs) - 0.05 if zs else 0.0
+    assert heights[0.0] < 0.01
+    assert heights[0.6] == pytest.approx(0.36 * 0.5, rel=0.3)
+    assert restitution_damping_ratio(0.0) == 1.0
+    assert restitution_damping_ratio(math.exp(-math.pi)) == pytest.approx(1 / math.sqrt(2))
+
+
+def test_duplicate_object_names():
+    box = Primitive("box", (0.1, 0.1, 0.1))
+    with pytest.raises(ValueError, match="unique"):
+        build_scene([SceneObject("a", box), SceneObject("a", box)])
+
+
+def test_missing_and_empty_mesh(tmp_path: Path):
+    with pytest.raises(InputError, match=r"nope\.obj: mesh: object mesh file not found"):
+        build_scene([SceneObject("m", MeshGeometry(str(tmp_path / "nope.obj")))])
+    empty = tmp_path / "empty.obj"
+    empty.write_text("# no vertices\n")
+    with pytest.raises(InputError, match=r"empty\.obj: mesh: .*(empty|cannot be read)"):
+        build_scene([SceneObject("m", MeshGeometry(str(empty)))])
+
+
+@needs_shared
+def test_omomo_box_mesh_collides_through_its_hull():
+    """The OMOMO box scan is not watertight; its hull rests on the floor at its lowest vertex."""
+    import trimesh
+
+    path = SHARED_MOCAP / "omomo" / "largebox.obj"
+    mesh = trimesh.load(path, force="mesh")
+    assert not mesh.is_watertight
+    obj = SceneObject("box", MeshGeometry(str(path)), ObjectPhysics(mass=4.0), pose=(0, 0, -mesh.bounds[0, 2] + 0.02, 1, 0, 0, 0))
+    s = build_scene([obj])
+    d = _settle(s)
+    assert d.xpos[s.object_body_id["box"], 2] == pytest.approx(-mesh.bounds[0, 2], abs=5e-3)
+    assert s.model.body_mass[s.object_body_id["box"]] == pytest.approx(4.0)
