@@ -17,12 +17,13 @@ export TOKENIZERS_PARALLELISM := false
 
 install: $(VENV)/.installed
 
+# constraints.txt pins every transitive package (regenerate: uv pip compile pyproject.toml --extra dev -o constraints.txt).
 # uv resolves and installs the pinned set in about a minute with a warm cache (pip: ~12 min).
-$(VENV)/.installed: pyproject.toml
+$(VENV)/.installed: pyproject.toml constraints.txt
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found (the toolkit needs Python 3.11)"; exit 1; }
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --disable-pip-version-check "uv==0.13.9"
-	$(VENV)/bin/uv pip install --python $(PY) -e ".[dev]"
+	$(VENV)/bin/uv pip install --python $(PY) -c constraints.txt -e ".[dev]"
 	touch $@
 
 retarget: install

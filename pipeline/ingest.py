@@ -19,7 +19,6 @@ from tqdm import tqdm
 from pipeline.clip import HumanClip
 from pipeline.errors import InputError
 
-DATASETS_ROOT = Path(os.environ.get("LESSMIMIC_DATASETS", "datasets"))
 HUMAN_FPS = 30
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
@@ -31,8 +30,13 @@ def check_name(name: str) -> str:
     return name
 
 
+def datasets_root() -> Path:
+    """``$LESSMIMIC_DATASETS`` or ``datasets/`` in the working directory."""
+    return Path(os.environ.get("LESSMIMIC_DATASETS", "datasets"))
+
+
 def stage_dir(name: str, stage: str, root: Path | None = None) -> Path:
-    return (root or DATASETS_ROOT) / check_name(name) / stage
+    return (root or datasets_root()) / check_name(name) / stage
 
 
 @dataclass(frozen=True)

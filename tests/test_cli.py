@@ -1,0 +1,59 @@
+"""The command line: help, bad names, and the foundation's chain on the embedded default."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from pipeline.cli import main
+from tests.mocap_paths import SHARED_MOCAP, needs_shared
+
+
+def test_help_lists_every_command():
+    out = subprocess.run([sys.executable, "-m", "pipeline.cli", "--help"], capture_output=True, text=True, check=True).stdout
+    for cmd in ("retarget", "physicalize", "features", "inspect", "load", "publish", "merge"):
+        assert cmd in out
+
+
+@pytest.mark.parametrize("name", ["a/b", "../up", "x\\y", ""])
+def test_bad_dataset_name_is_one_line_error(name, tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path))
+    assert main(["retarget", "--name", name]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and "name" in err and "\n" not in err
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+def test_default_chain_writes_and_reloads_the_human_dataset(tmp_path, monkeypatch, capsys):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path))
+    assert main(["retarget"]) == 0
+    root = tmp_path / "default" / "human"
+    ds = LeRobotDataset("lessmimic/default-human", root=root)
+    assert ds.num_episodes == 4
+    report = json.loads((root / "report.json").read_text())
+    assert report["synthetic"] is True and report["frames"] == ds.num_frames
+    assert sorted(c["task"] for c in report["clips"]) == ["Carry", "PickUp", "Push", "SitStand"]
+    assert "SYNTHETIC" in (root / "README.md").read_text()
+    assert len(list((tmp_path / "default" / "logs" / "human").glob("*.mcap"))) == 4
+    # A second run refuses to overwrite, with one line, and leaves the dataset intact.
+    capsys.readouterr()
+    assert main(["retarget"]) == 2
+    err = capsys.readouterr().err
+    assert "--overwrite" in err and err.count("\n") == 1
+    assert LeRobotDataset("lessmimic/default-human", root=root).num_frames == ds.num_frames
+    assert main(["physicalize"]) == 0 and "not built yet (issue #4)" in capsys.readouterr().out
+
+
+@needs_shared
+@pytest.mark.slow
+def test_folder_input_with_object(tmp_path, monkeypatch):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path))
+    assert main(["retarget", "--input", str(SHARED_MOCAP / "omomo"), "--name", "omomo"]) == 0
+    ds = LeRobotDataset("lessmimic/omomo-human", root=tmp_path / "omomo" / "human")
+    assert ds.num_episodes == 1 and ds.num_frames == 196
