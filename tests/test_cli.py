@@ -7,7 +7,7 @@ import sys
 import pytest
 
 from pipeline.cli import main
-from tests.mocap_paths import SHARED_MOCAP, needs_shared
+from mocap_paths import SHARED_MOCAP, needs_shared
 
 
 def test_help_lists_every_command():
