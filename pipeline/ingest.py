@@ -74,6 +74,8 @@ def ingest(
     from pipeline.inspect_log import write_human_log
 
     out = stage_dir(name, "human", root)
+    if out.exists() and not overwrite:  # before any work, so the user sees only this line
+        raise InputError(out, "dataset", "already exists; pass --overwrite (OVERWRITE=1 with make) to replace it")
     t0 = time.perf_counter()
     clips = [c.resampled(HUMAN_FPS) for c in tqdm(load_input(input_path, body_model=body_model), desc="read", unit="clip")]
     synthetic = any(c.synthetic for c in clips)
