@@ -1,0 +1,266 @@
+"""Clips <-> dataset episodes, shared by every stage that writes or reads a dataset.
+
+Robot datasets (:func:`robot_clips_to_episodes`, :func:`episodes_to_robot_clips`):
+
+* ``observation.state`` -- MuJoCo ``qpos`` (36): root position (m, world), root quaternion
+  (wxyz, world), 29 joint angles (rad) in :data:`pipeline.robot.G1_JOINT_NAMES` order;
+* ``observation.qvel`` -- MuJoCo ``qvel`` (35) from finite differences of ``qpos``
+  (:func:`qvel_from_qpos`): root linear velocity in the world frame (m/s), root angular velocity
+  in the body (pelvis) frame (rad/s), joint velocities (rad/s);
+* ``contact`` -- per contact link, ``True`` when the link touches an object (if the clips name links);
+* ``object.<name>.pose`` -- object pose (x, y, z, qw, qx, qy, qz) in the world frame, and
+  ``object.<name>.contact`` (1 bool) when any clip has contact flags for that object;
+* ``source_frame`` -- frame index in the source motion: ``t + provenance["source_frame_start"]``
+  (0 when absent).
+
+Human datasets (:func:`human_clips_to_episodes`, :func:`episodes_to_human_clips`):
+``observation.joint_pos`` (J*3, names ``<joint>.x``), ``observation.joint_quat`` (J*4, names
+``<joint>.qw`` ..., when the clips have orientations), ``contact`` (J), the object features and
+``source_frame``; the skeleton lives in the per-episode sidecar metadata.
+
+All clips of one dataset must share the fps (an integer: LeRobot stores integer fps), the object
+names, the contact links and (human) the skeleton, because a dataset has one feature spec.
+Object geometry, masses, sources, provenance and per-clip presence flags go into the per-episode
+``meta`` (``meta/lessmimic_episodes.jsonl``); reading back restores the clips exactly up to float32.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.clip import HumanClip, ObjectTrack, RobotClip, Skeleton
+from pipeline.dataset import Episode, Feature
+from pipeline.errors import InputError
+from pipeline.geometry import geometry_from_dict, geometry_to_dict
+from pipeline.robot import G1_JOINT_NAMES, QPOS_NAMES
+
+POSE_NAMES = ("x", "y", "z", "qw", "qx", "qy", "qz")
+QVEL_NAMES: tuple[str, ...] = ("root_vx", "root_vy", "root_vz", "root_wx", "root_wy", "root_wz") + G1_JOINT_NAMES
+DEFAULT_TASK = "humanoid whole-body motion"
+
+
+# --- velocities ----------------------------------------------------------------------------------
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)  # fmt: skip
+
+
+def quat_velocity(q1: np.ndarray, q2: np.ndarray, dt: float) -> np.ndarray:
+    """Angular velocity (rad/s, in the frame of ``q1``, equally of ``q2``) turning ``q1`` into ``q2`` in ``dt``.
+
+    ``dq = conj(q1) * q2``; the result is ``axis * angle / dt`` with the angle wrapped to
+    ``[-pi, pi]`` (the shorter way) -- MuJoCo's ``mju_subQuat`` / ``mju_quat2Vel``.
+    """
+    q1 = q1 / np.linalg.norm(q1, axis=-1, keepdims=True)
+    q2 = q2 / np.linalg.norm(q2, axis=-1, keepdims=True)
+    dq = _quat_mul(q1 * np.array([1.0, -1.0, -1.0, -1.0]), q2)
+    dq = np.where(dq[..., :1] < 0, -dq, dq)
+    v = dq[..., 1:]
+    s = np.linalg.norm(v, axis=-1, keepdims=True)
+    angle = 2.0 * np.arctan2(s, dq[..., :1])
+    scale = np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 2.0)
+    return v * scale / dt
+
+
+def qpos_difference(q1: np.ndarray, q2: np.ndarray, dt: float) -> np.ndarray:
+    """``mj_differentiatePos`` for the G1 layout: ``(..., 36), (..., 36) -> (..., 35)``."""
+    return np.concatenate([(q2[..., :3] - q1[..., :3]) / dt, quat_velocity(q1[..., 3:7], q2[..., 3:7], dt),
+                           (q2[..., 7:] - q1[..., 7:]) / dt], axis=-1)  # fmt: skip
+
+
+def qvel_from_qpos(qpos: np.ndarray, fps: float) -> np.ndarray:
+    """``(T, 35)`` velocities: the mean of the backward and forward differences (central), one-sided
+    at the first and last frame, zeros for a one-frame clip."""
+    qpos = np.asarray(qpos, dtype=np.float64)
+    if qpos.shape[0] < 2:
+        return np.zeros((qpos.shape[0], 35))
+    d = qpos_difference(qpos[:-1], qpos[1:], 1.0 / fps)
+    return np.concatenate([d[:1], 0.5 * (d[:-1] + d[1:]), d[-1:]], axis=0)
+
+
+# --- shared helpers ------------------------------------------------------------------------------
+
+
+def clips_fps(clips: Sequence[RobotClip | HumanClip]) -> int:
+    """The clips' common integer fps, or an InputError naming the first clip that differs."""
+    if not clips:
+        raise InputError(None, "clips", "no clips to convert")
+    fps = clips[0].fps
+    for c in clips:
+        if abs(c.fps - fps) > 1e-9:
+            raise InputError(c.source, "fps", f"{c.fps} differs from {clips[0].source} ({fps}); resample first")
+    if abs(fps - round(fps)) > 1e-6:
+        raise InputError(clips[0].source, "fps", f"{fps} is not an integer; LeRobot needs an integer fps: resample first")
+    return int(round(fps))
+
+
+def _common(clips, attr: str, what: str):
+    ref = getattr(clips[0], attr)
+    for c in clips[1:]:
+        if getattr(c, attr) != ref:
+            raise InputError(c.source, what, f"{getattr(c, attr)!r} differs from {clips[0].source} ({ref!r}); one dataset has one feature spec")
+    return ref
+
+
+def _object_features(clips) -> tuple[list[Feature], tuple[str, ...], set[str]]:
+    for c in clips:
+        names = tuple(o.name for o in c.objects)
+        if names != tuple(o.name for o in clips[0].objects):
+            raise InputError(c.source, "objects", f"{list(names)} differ from {clips[0].source}; one dataset has one feature spec")
+        for n in names:
+            if not n or "/" in n:
+                raise InputError(c.source, "objects", f"object name {n!r} is empty or contains '/'")
+    names = tuple(o.name for o in clips[0].objects)
+    with_contact = {o.name for c in clips for o in c.objects if o.contact is not None}
+    feats = []
+    for n in names:
+        feats.append(Feature(f"object.{n}.pose", "float32", POSE_NAMES, f"pose of object {n!r}: position, quaternion wxyz", "m"))
+        if n in with_contact:
+            feats.append(Feature(f"object.{n}.contact", "bool", ("contact",), f"object {n!r} is in contact"))
+    return feats, names, with_contact
+
+
+def _object_data(clip, with_contact: set[str]) -> tuple[dict, list[dict]]:
+    data, meta = {}, []
+    for o in clip.objects:
+        data[f"object.{o.name}.pose"] = o.pose
+        if o.name in with_contact:
+            data[f"object.{o.name}.contact"] = np.zeros(o.frames, bool) if o.contact is None else o.contact
+        meta.append({"name": o.name, "geometry": geometry_to_dict(o.geometry), "mass": o.mass, "source": o.source,
+                     "has_contact": o.contact is not None})  # fmt: skip
+    return data, meta
+
+
+def _objects_back(ep: Episode, source: str) -> tuple[ObjectTrack, ...]:
+    out = []
+    for m in ep.meta.get("objects", []):
+        c = ep.data.get(f"object.{m['name']}.contact")
+        contact = c[:, 0].astype(bool) if c is not None and m.get("has_contact") else None
+        pose = ep.data[f"object.{m['name']}.pose"].astype(np.float64)
+        out.append(ObjectTrack(m["name"], geometry_from_dict(m["geometry"]), pose, contact, m.get("mass"), m.get("source", source)))
+    return tuple(out)
+
+
+def _source_frames(T: int, start) -> np.ndarray:
+    return np.arange(T, dtype=np.int64) + int(start or 0)
+
+
+_SOURCE_FRAME = Feature("source_frame", "int64", ("source_frame",), "frame index in the source motion")
+
+
+# --- robot clips ---------------------------------------------------------------------------------
+
+
+def robot_clips_to_episodes(clips: Sequence[RobotClip], *, default_task: str = DEFAULT_TASK) -> tuple[list[Feature], list[Episode]]:
+    """The feature spec and one episode per clip (write them with ``write_dataset(..., fps=clips_fps(clips))``)."""
+    fps = clips_fps(clips)
+    links = _common(clips, "contact_links", "contact_links")
+    obj_feats, _, with_contact = _object_features(clips)
+    features = [
+        Feature("observation.state", "float32", QPOS_NAMES, "G1 qpos: root position, root quaternion wxyz (world), joint angles", "m, rad"),
+        Feature("observation.qvel", "float32", QVEL_NAMES, "G1 qvel by finite differences: root linear velocity (world), root angular velocity (body), joint velocities", "m/s, rad/s"),
+    ]  # fmt: skip
+    if links:
+        features.append(Feature("contact", "bool", links, "link touches an object"))
+    features += obj_feats + [_SOURCE_FRAME]
+    episodes = []
+    for c in clips:
+        data = {"observation.state": c.qpos, "observation.qvel": qvel_from_qpos(c.qpos, fps)}
+        if links:
+            data["contact"] = np.zeros((c.frames, len(links)), bool) if c.contacts is None else c.contacts
+        obj_data, obj_meta = _object_data(c, with_contact)
+        data.update(obj_data)
+        data["source_frame"] = _source_frames(c.frames, c.provenance.get("source_frame_start"))
+        meta = {"kind": "robot", "source": c.source, "fps": c.fps, "method": c.method, "clip_task": c.task,
+                "synthetic": bool(c.provenance.get("synthetic", False)), "provenance": c.provenance,
+                "contact_links": list(c.contact_links), "has_contacts": c.contacts is not None, "objects": obj_meta}  # fmt: skip
+        episodes.append(Episode(c.task or default_task, data, meta))
+    return features, episodes
+
+
+def episodes_to_robot_clips(root: str | Path) -> list[RobotClip]:
+    """Robot clips back from a dataset written from :func:`robot_clips_to_episodes`."""
+    from pipeline.dataset_read import iter_episodes, read_info
+
+    fps = read_info(root)["fps"]
+    clips = []
+    for e, ep in enumerate(iter_episodes(root)):
+        m = ep.meta
+        if m.get("kind") != "robot":
+            raise InputError(root, f"episode {e}", "was not written from a robot clip (sidecar meta kind is not 'robot')")
+        links = tuple(m.get("contact_links", ()))
+        contacts = ep.data["contact"].astype(bool) if links and m.get("has_contacts") else None
+        clips.append(RobotClip(
+            qpos=ep.data["observation.state"].astype(np.float64), fps=float(m.get("fps", fps)), source=m["source"],
+            objects=_objects_back(ep, m["source"]), contact_links=links, contacts=contacts, method=m.get("method", ""),
+            provenance=m.get("provenance", {}), task=m.get("clip_task", ep.task),
+        ))  # fmt: skip
+    return clips
+
+
+# --- human clips ---------------------------------------------------------------------------------
+
+
+def human_clips_to_episodes(clips: Sequence[HumanClip], *, default_task: str = DEFAULT_TASK) -> tuple[list[Feature], list[Episode]]:
+    """The feature spec and one episode per human clip (all clips share one skeleton)."""
+    clips_fps(clips)
+    skel: Skeleton = _common(clips, "skeleton", "skeleton")
+    quat = {c.joint_quat is not None for c in clips}
+    if len(quat) > 1:
+        bad = next(c for c in clips if (c.joint_quat is not None) != (clips[0].joint_quat is not None))
+        raise InputError(bad.source, "joint_quat", f"present in some clips only (e.g. {clips[0].source} vs this one)")
+    has_contacts = any(c.contacts is not None for c in clips)
+    obj_feats, _, with_contact = _object_features(clips)
+    J = skel.joint_names
+    features = [Feature("observation.joint_pos", "float32", tuple(f"{j}.{a}" for j in J for a in "xyz"), "global joint positions (world, z-up)", "m")]
+    if quat.pop():
+        features.append(Feature("observation.joint_quat", "float32", tuple(f"{j}.q{a}" for j in J for a in "wxyz"), "global joint orientations, quaternion wxyz (world)"))
+    if has_contacts:
+        features.append(Feature("contact", "bool", J, "joint in contact with an object or the ground"))
+    features += obj_feats + [_SOURCE_FRAME]
+    episodes = []
+    for c in clips:
+        T = c.frames
+        data = {"observation.joint_pos": c.joint_pos.reshape(T, -1)}
+        if c.joint_quat is not None:
+            data["observation.joint_quat"] = c.joint_quat.reshape(T, -1)
+        if has_contacts:
+            data["contact"] = np.zeros((T, len(J)), bool) if c.contacts is None else c.contacts
+        obj_data, obj_meta = _object_data(c, with_contact)
+        data.update(obj_data)
+        data["source_frame"] = _source_frames(T, 0)
+        meta = {"kind": "human", "source": c.source, "fps": c.fps, "clip_task": c.task, "synthetic": c.synthetic,
+                "subject_height": c.subject_height, "skeleton": {"joint_names": list(J), "parents": list(skel.parents)},
+                "has_contacts": c.contacts is not None, "objects": obj_meta}  # fmt: skip
+        episodes.append(Episode(c.task or default_task, data, meta))
+    return features, episodes
+
+
+def episodes_to_human_clips(root: str | Path) -> list[HumanClip]:
+    """Human clips back from a dataset written from :func:`human_clips_to_episodes`."""
+    from pipeline.dataset_read import iter_episodes, read_info
+
+    fps = read_info(root)["fps"]
+    clips = []
+    for e, ep in enumerate(iter_episodes(root)):
+        m = ep.meta
+        if m.get("kind") != "human":
+            raise InputError(root, f"episode {e}", "was not written from a human clip (sidecar meta kind is not 'human')")
+        skel = Skeleton(tuple(m["skeleton"]["joint_names"]), tuple(m["skeleton"]["parents"]))
+        T, J = ep.data["observation.joint_pos"].shape[0], len(skel.joint_names)
+        quat = ep.data.get("observation.joint_quat")
+        contacts = ep.data["contact"].astype(bool) if m.get("has_contacts") else None
+        clips.append(HumanClip(
+            skeleton=skel, joint_pos=ep.data["observation.joint_pos"].astype(np.float64).reshape(T, J, 3),
+            fps=float(m.get("fps", fps)), source=m["source"], subject_height=m.get("subject_height"),
+            joint_quat=None if quat is None else quat.astype(np.float64).reshape(T, J, 4), contacts=contacts,
+            objects=_objects_back(ep, m["source"]), task=m.get("clip_task", ep.task), synthetic=bool(m.get("synthetic", False)),
+        ))  # fmt: skip
+    return clips

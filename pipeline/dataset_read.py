@@ -1,0 +1,175 @@
+"""Reading LeRobot v3.0 datasets straight from their parquet columns (pyarrow -> numpy / torch).
+
+:class:`WindowDataset` serves history windows for training far faster than
+``LeRobotDataset(..., delta_timestamps=...)`` with the same values and padding semantics: the
+window of frame ``i`` is frames ``i-history+1 .. i``; a frame before its episode's first frame is
+replaced by that first frame and flagged ``True`` in ``<key>_is_pad``.
+
+Works on any v3.0 dataset (ours or LeRobot's); the ``lessmimic`` sidecars (feature descriptions,
+per-episode provenance) are used when present.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import torch
+
+from pipeline.dataset import INDEX_COLUMNS, SIDECAR_DATASET, SIDECAR_EPISODES, Episode, Feature
+from pipeline.dataset_card import DatasetCard
+from pipeline.errors import InputError
+
+
+def read_info(root: str | Path) -> dict:
+    path = Path(root) / "meta/info.json"
+    if not path.is_file():
+        raise InputError(path, "dataset", "is not a LeRobot dataset (meta/info.json missing)")
+    return json.loads(path.read_text())
+
+
+def read_sidecar(root: str | Path) -> dict:
+    """``meta/lessmimic.json`` (``{}`` for a dataset we did not write)."""
+    path = Path(root) / SIDECAR_DATASET
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def read_card(root: str | Path) -> DatasetCard | None:
+    d = read_sidecar(root).get("card")
+    return None if d is None else DatasetCard.from_dict(d)
+
+
+def read_episode_meta(root: str | Path) -> list[dict]:
+    """Per-episode provenance from ``meta/lessmimic_episodes.jsonl``, by episode index."""
+    path = Path(root) / SIDECAR_EPISODES
+    if not path.is_file():
+        return []
+    rows = [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+    return sorted(rows, key=lambda r: r["episode_index"])
+
+
+def read_features(root: str | Path) -> tuple[Feature, ...]:
+    """The feature spec (LeRobot's index columns excluded) from ``info.json`` and the sidecar."""
+    info, docs = read_info(root), read_sidecar(root).get("features", {})
+    out = []
+    for name, ft in info["features"].items():
+        if name in INDEX_COLUMNS:
+            continue
+        if len(ft["shape"]) != 1 or ft["dtype"] not in ("float32", "int64", "bool"):
+            raise InputError(root, name, f"unsupported feature (dtype {ft['dtype']}, shape {ft['shape']})")
+        names = ft.get("names") or [f"{name}_{k}" for k in range(ft["shape"][0])]
+        doc = docs.get(name, {})
+        out.append(Feature(name, ft["dtype"], tuple(names), doc.get("description", ""), doc.get("unit", "")))
+    return tuple(out)
+
+
+def _data_files(root: Path) -> list[Path]:
+    files = sorted((root / "data").glob("*/*.parquet"))
+    if not files:
+        raise InputError(root, "data", "no parquet files under data/")
+    return files
+
+
+def _to_numpy(col: pa.ChunkedArray) -> np.ndarray:
+    """A column as ``(N, dim)``: fixed-size lists are unpacked, scalars become one column."""
+    parts = []
+    for chunk in col.chunks:
+        if pa.types.is_fixed_size_list(chunk.type) or pa.types.is_list(chunk.type):
+            values = chunk.flatten().to_numpy(zero_copy_only=False)
+            parts.append(values.reshape(len(chunk), -1))
+        else:
+            parts.append(chunk.to_numpy(zero_copy_only=False).reshape(-1, 1))
+    return np.concatenate(parts) if len(parts) != 1 else parts[0]
+
+
+def read_columns(root: str | Path, keys: Sequence[str]) -> dict[str, np.ndarray]:
+    """``{key: (N, dim)}`` over the whole dataset in ``index`` order."""
+    root = Path(root)
+    cols = list(dict.fromkeys([*keys, "index"]))
+    table = pa.concat_tables([pq.read_table(f, columns=cols) for f in _data_files(root)])
+    out = {k: _to_numpy(table.column(k)) for k in cols}
+    order = out["index"][:, 0]
+    if np.any(np.diff(order) < 0):
+        perm = np.argsort(order, kind="stable")
+        out = {k: v[perm] for k, v in out.items()}
+    if "index" not in keys:
+        out.pop("index")
+    return out
+
+
+def episode_ranges(root: str | Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """``(from_index, to_index, task)`` per episode, from ``meta/episodes``."""
+    root = Path(root)
+    files = sorted((root / "meta/episodes").glob("*/*.parquet"))
+    t = pa.concat_tables(
+        [pq.read_table(f, columns=["episode_index", "tasks", "dataset_from_index", "dataset_to_index"]) for f in files]
+    ).sort_by("episode_index")
+    tasks = [ts[0] if ts else "" for ts in t.column("tasks").to_pylist()]
+    return t.column("dataset_from_index").to_numpy(), t.column("dataset_to_index").to_numpy(), tasks
+
+
+def iter_episodes(root: str | Path) -> Iterator[Episode]:
+    """Every episode back as an :class:`Episode` (data in the feature dtypes, meta from the sidecar)."""
+    root = Path(root)
+    features = read_features(root)
+    cols = read_columns(root, [f.name for f in features])
+    starts, ends, tasks = episode_ranges(root)
+    metas = {m["episode_index"]: m for m in read_episode_meta(root)}
+    for e, (a, b) in enumerate(zip(starts, ends)):
+        meta = {k: v for k, v in metas.get(e, {}).items() if k not in ("episode_index", "task", "length")}
+        yield Episode(tasks[e], {f.name: cols[f.name][a:b] for f in features}, meta)
+
+
+class WindowDataset(torch.utils.data.Dataset):
+    """History windows over parquet columns, as a ``torch.utils.data.Dataset``.
+
+    ``ds[i]`` -> ``{key: (history, dim) tensor, f"{key}_is_pad": (history,) bool tensor,
+    "index": i, "episode_index": e}``; :meth:`sample` does the same for a batch of indices in one
+    vectorised gather (``(B, history, dim)`` and ``(B, history)``). LeRobot returns a one-element
+    feature as ``(history,)``; here it is ``(history, 1)``.
+    """
+
+    def __init__(self, root: str | Path, keys: Sequence[str], history: int = 5):
+        if history < 1:
+            raise ValueError(f"history must be >= 1, got {history}")
+        self.root, self.keys, self.history = Path(root), tuple(keys), int(history)
+        info = read_info(self.root)
+        unknown = [k for k in self.keys if k not in info["features"]]
+        if unknown:
+            raise InputError(self.root, "keys", f"unknown features {unknown}")
+        self.fps = info["fps"]
+        cols = read_columns(self.root, [*self.keys, "episode_index", "index"])
+        if not np.array_equal(cols["index"][:, 0], np.arange(len(cols["index"]))):
+            raise InputError(self.root, "index", "frames are not numbered 0..N-1")
+        self.data = {k: torch.from_numpy(np.require(cols[k], requirements=["C", "W"])) for k in self.keys}
+        starts, ends, _ = episode_ranges(self.root)
+        ep = cols["episode_index"][:, 0]
+        self.episode_index = torch.from_numpy(ep.copy())
+        self.ep_start = torch.from_numpy(starts[ep].astype(np.int64))
+        self.offsets = torch.arange(-self.history + 1, 1, dtype=torch.int64)
+
+    def __len__(self) -> int:
+        return int(self.episode_index.shape[0])
+
+    def sample(self, indices) -> dict:
+        """Windows for a batch of frame indices: ``(B, history, dim)`` per key, ``(B, history)`` pads."""
+        idx = torch.as_tensor(indices, dtype=torch.int64).reshape(-1)
+        want = idx[:, None] + self.offsets  # offsets <= 0: only the episode start can be crossed
+        start = self.ep_start.index_select(0, idx)[:, None]
+        pad = want < start
+        rows = torch.maximum(want, start).reshape(-1)
+        shape = (idx.shape[0], self.history)
+        out = {k: v.index_select(0, rows).view(*shape, v.shape[1]) for k, v in self.data.items()}
+        out.update({f"{k}_is_pad": pad for k in self.keys})
+        out["index"], out["episode_index"] = idx, self.episode_index.index_select(0, idx)
+        return out
+
+    def __getitem__(self, i: int) -> dict:
+        if not -len(self) <= i < len(self):
+            raise IndexError(i)
+        b = self.sample([i % len(self)])
+        return {k: v[0] for k, v in b.items()}
