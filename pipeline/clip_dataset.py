@@ -223,7 +223,7 @@ def human_clips_to_episodes(clips: Sequence[HumanClip], *, default_task: str = D
     if quat.pop():
         features.append(Feature("observation.joint_quat", "float32", tuple(f"{j}.q{a}" for j in J for a in "wxyz"), "global joint orientations, quaternion wxyz (world)"))
     if has_contacts:
-        features.append(Feature("contact", "bool", J, "joint in contact with an object or the ground"))
+        features.append(Feature("contact", "bool", J, "joint in contact with an object (foot-ground contact is derived downstream)"))
     features += obj_feats + [_SOURCE_FRAME]
     episodes = []
     for c in clips:
