@@ -1,0 +1,151 @@
+"""Mocap readers: every supported file (or a folder of them) -> validated clips, z-up metres.
+
+=========  ====================================================================================
+suffix     reader
+=========  ====================================================================================
+``.bvh``   :func:`~pipeline.readers.bvh.read_bvh` (any skeleton; units and up axis guessed)
+``.pt``    :func:`~pipeline.readers.omomo.read_omomo` (OMOMO / InterMimic 591 columns + mesh)
+``.npz``   by its keys: ``poses`` -> AMASS (:func:`~pipeline.readers.amass.read_amass`, needs
+           ``body_model``); ``joint_pos [T,J,3]`` / ``positions`` -> keypoints; ``joint_pos
+           [T,36|29]`` -> a peer's G1 motion (:func:`read_robot_clip`, not a human clip)
+``.c3d``   :func:`~pipeline.readers.c3d.read_c3d` (labelled markers)
+``.mcap``  :func:`~pipeline.readers.mcap_reader.read_mcap` (transform / rigid-body streams)
+``.csv``   :func:`~pipeline.readers.keypoints.read_keypoints_csv`
+``.pkl``   GMR robot motion, through :func:`read_robot_clip` only
+=========  ====================================================================================
+
+A folder yields every clip inside it and in its direct sub-folders, sorted by relative path.
+Files that are not human clips are skipped there: other suffixes (meshes, ``height_dict.pkl``),
+peers' robot ``.npz``, ``.npz`` files with none of the keys above, and ``.mcap`` files without a
+transform stream (e.g. inspection logs). Any other problem in a clip is an error, as for a file.
+
+``fps`` is a fallback rate for files that carry none (CSV without a ``time`` column, keypoint
+``.npz`` without ``fps``) and the sampling rate of MCAP streams; files with their own rate keep it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.clip import HumanClip, RobotClip
+from pipeline.errors import InputError
+from pipeline.geometry import ObjectGeometry
+
+HUMAN_SUFFIXES = (".bvh", ".pt", ".npz", ".c3d", ".mcap", ".csv")
+ROBOT_SUFFIXES = (".npz", ".pkl")
+
+
+class _NotHuman(InputError):
+    """A readable file that is not a human clip (skipped inside folders)."""
+
+
+def npz_kind(path: str | Path) -> str | None:
+    """``"amass"``, ``"keypoints"``, ``"robot"`` or ``None`` from an ``.npz``'s keys."""
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            keys = set(d.files)
+            if "poses" in keys:
+                return "amass"
+            if "positions" in keys:
+                return "keypoints"
+            if "joint_pos" in keys:
+                return "keypoints" if d["joint_pos"].ndim == 3 else "robot"
+    except (OSError, ValueError) as e:
+        raise InputError(path, "file", f"not a readable npz ({e})") from None
+    return None
+
+
+def read_clip(path: str | Path, *, body_model: str | Path | None = None, fps: float | None = None,
+              mesh: str | Path | None = None) -> HumanClip:  # fmt: skip
+    """One human clip file, dispatched by suffix (see the module doc)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".bvh":
+        from pipeline.readers.bvh import read_bvh
+
+        return read_bvh(path)
+    if suffix == ".pt":
+        from pipeline.readers.omomo import read_omomo
+
+        return read_omomo(path, mesh=mesh)
+    if suffix == ".c3d":
+        from pipeline.readers.c3d import read_c3d
+
+        return read_c3d(path)
+    if suffix == ".mcap":
+        from pipeline.readers.mcap_reader import read_mcap
+
+        return read_mcap(path, fps=fps)
+    if suffix == ".csv":
+        from pipeline.readers.keypoints import read_keypoints_csv
+
+        return read_keypoints_csv(path, fps=fps)
+    if suffix == ".npz":
+        return _read_npz(path, body_model, fps)
+    raise InputError(path, "suffix", f"unknown clip format {path.suffix or '(none)'!r}; expected one of {', '.join(HUMAN_SUFFIXES)}")
+
+
+def _read_npz(path: Path, body_model, fps) -> HumanClip:
+    kind = npz_kind(path)
+    if kind == "amass":
+        from pipeline.readers.amass import read_amass
+
+        return read_amass(path, body_model)
+    if kind == "keypoints":
+        from pipeline.readers.keypoints import read_keypoints_npz
+
+        return read_keypoints_npz(path, fps=fps)
+    if kind == "robot":
+        raise _NotHuman(path, "joint_pos", "is a G1 robot motion (BeyondMimic/mjlab npz), not a human clip: read it with read_robot_clip / --robot")
+    raise _NotHuman(path, "keys", "none of 'poses' (AMASS), 'joint_pos'/'positions' (keypoints or robot motion)")
+
+
+def _candidates(folder: Path) -> list[Path]:
+    files = [p for p in folder.iterdir() if p.is_file()]
+    for sub in (p for p in folder.iterdir() if p.is_dir() and not p.name.startswith(".")):
+        files += [p for p in sub.iterdir() if p.is_file()]
+    return sorted((p for p in files if p.suffix.lower() in HUMAN_SUFFIXES), key=lambda p: p.relative_to(folder).as_posix())
+
+
+def read_clips(path: str | Path, *, body_model: str | Path | None = None, fps: float | None = None,
+               mesh: str | Path | None = None) -> list[HumanClip]:  # fmt: skip
+    """Every human clip in ``path`` (a file, or a folder searched one level deep)."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, "input", "does not exist")
+    if path.is_file():
+        return [read_clip(path, body_model=body_model, fps=fps, mesh=mesh)]
+    clips = []
+    for p in _candidates(path):
+        try:
+            clips.append(read_clip(p, body_model=body_model, fps=fps, mesh=mesh))
+        except _NotHuman:
+            continue
+        except InputError as e:
+            if p.suffix.lower() == ".mcap" and e.field == "topics":  # an MCAP without transform streams
+                continue
+            raise
+    if not clips:
+        raise InputError(path, "input", f"no readable human clips ({', '.join(HUMAN_SUFFIXES)}) in this folder or its sub-folders")
+    return clips
+
+
+def read_robot_clip(path: str | Path, *, object_geometry: ObjectGeometry | None = None, object_scale: float = 1.0,
+                    object_name: str | None = None, joint_names: list[str] | None = None) -> RobotClip:  # fmt: skip
+    """A peer's G1 motion: BeyondMimic/mjlab ``.npz`` or GMR ``.pkl`` (see :mod:`pipeline.readers.peers`)."""
+    from pipeline.readers.peers import read_beyondmimic_npz, read_gmr_pkl
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "input", "does not exist or is not a file")
+    suffix = path.suffix.lower()
+    if suffix == ".pkl":
+        return read_gmr_pkl(path)
+    if suffix == ".npz":
+        if npz_kind(path) != "robot":
+            raise InputError(path, "joint_pos", "is not a G1 motion npz (expected joint_pos [T, 36] or [T, 29])")
+        return read_beyondmimic_npz(path, object_geometry=object_geometry, object_scale=object_scale,
+                                    object_name=object_name, joint_names=joint_names)  # fmt: skip
+    raise InputError(path, "suffix", f"unknown robot motion format {path.suffix or '(none)'!r}; expected .npz or .pkl")

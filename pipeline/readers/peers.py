@@ -1,0 +1,147 @@
+"""Other retargeters' G1 outputs -> :class:`RobotClip`, so our metrics can score them.
+
+BeyondMimic / mjlab motion ``.npz`` (OmniRetarget writes it too)
+    ``fps``; ``joint_pos`` ``[T, 36]`` (root xyz, root quaternion ``wxyz``, 29 joints) or
+    ``[T, 29]`` (joints only; the root then comes from ``body_pos_w`` / ``body_quat_w`` of the
+    ``pelvis`` body, else body 0); ``joint_names`` ``[29]``; optional ``object_pos_w`` ``[T, 3]``
+    and ``object_quat_w`` ``[T, 4]``. Joints are reordered by name into
+    :data:`~pipeline.robot.G1_JOINT_NAMES` (mjlab's order, which the OmniRetarget file already
+    uses); a file without ``joint_names`` needs ``joint_names=``. ``object_quat_w`` is
+    ``wxyz``: in ``sub3_largebox_003_mj_w_obj.npz`` it equals the ``largebox_link`` entry of
+    ``body_quat_w`` (MuJoCo order, 1e-7) and the human clip's ``xyzw`` object quaternion with its
+    scalar moved first.
+
+    The object's geometry is not in the file: pass ``object_geometry=`` (e.g. a
+    :class:`~pipeline.geometry.MeshGeometry` of ``largebox.obj``); without it the object is left
+    out (with a warning). ``object_scale`` scales that geometry. OmniRetarget scales the
+    *trajectory* by the robot/human ratio (object ``xy`` x 0.68, and ``z`` about its resting
+    height: the box still rests at the human clip's 0.184 m), not the mesh, so 1.0 is right for
+    that file.
+
+GMR ``.pkl`` (a pickle of numpy arrays)
+    ``fps``, ``root_pos`` ``[T, 3]``, ``root_rot`` ``[T, 4]`` scalar-last ``xyzw``, ``dof_pos``
+    ``[T, 29]`` in the Unitree G1 29-DoF order (= mjlab's; GMR stores no names), optional
+    ``local_body_pos`` and ``link_body_list`` (kept in ``provenance``). Loaded with a
+    numpy-only unpickler.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.clip import ObjectTrack, RobotClip
+from pipeline.errors import InputError, first_bad_frame
+from pipeline.geometry import ObjectGeometry
+from pipeline.readers.keypoints import load_npz, load_numpy_pickle
+from pipeline.robot import G1_JOINT_NAMES
+from pipeline.rotations import xyzw_to_wxyz
+
+
+def _array(d, key: str, width: int | None, src: str, frames: int | None = None) -> np.ndarray:
+    """``d[key]`` as float64 ``[T, width]``, finite, with ``frames`` rows when given."""
+    if key not in d:
+        raise InputError(src, key, f"missing (keys are {', '.join(sorted(d))})")
+    a = np.asarray(d[key], dtype=np.float64)
+    if a.ndim != 2 or (width is not None and a.shape[1] != width):
+        raise InputError(src, key, f"shape {a.shape} is not (T, {width})")
+    if a.shape[0] == 0:
+        raise InputError(src, key, "has zero frames")
+    if frames is not None and a.shape[0] != frames:
+        raise InputError(src, key, f"has {a.shape[0]} frames, expected {frames}")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        raise InputError(src, key, "is NaN or infinite", frame=first_bad_frame(bad))
+    return a
+
+
+def _fps(d, src: str) -> float:
+    if "fps" not in d:
+        raise InputError(src, "fps", "missing")
+    fps = float(np.asarray(d["fps"]).reshape(-1)[0])
+    if not np.isfinite(fps) or fps <= 0:
+        raise InputError(src, "fps", f"must be positive, got {fps}")
+    return fps
+
+
+def reorder_joints(names, src: str) -> np.ndarray:
+    """Column index of each :data:`G1_JOINT_NAMES` joint in a file whose joints are ``names``."""
+    names = [str(n) for n in names]
+    missing = [n for n in G1_JOINT_NAMES if n not in names]
+    if missing:
+        raise InputError(src, "joint_names", f"missing G1 joints: {', '.join(missing)}")
+    if len(names) != len(G1_JOINT_NAMES):
+        extra = [n for n in names if n not in G1_JOINT_NAMES]
+        raise InputError(src, "joint_names", f"{len(names)} names for 29 G1 joints (unknown: {', '.join(extra) or 'duplicates'})")
+    return np.array([names.index(n) for n in G1_JOINT_NAMES])
+
+
+def _root_from_bodies(d, src: str, frames: int) -> np.ndarray:
+    """Root pose ``[T, 7]`` from ``body_pos_w``/``body_quat_w`` (the ``pelvis`` body, else body 0)."""
+    for key in ("body_pos_w", "body_quat_w"):
+        if key not in d:
+            raise InputError(src, key, "missing: joint_pos has no root columns, so the root must come from the bodies")
+    names = [str(n) for n in d["body_names"]] if "body_names" in d else []
+    b = names.index("pelvis") if "pelvis" in names else 0
+    pos, quat = np.asarray(d["body_pos_w"], np.float64), np.asarray(d["body_quat_w"], np.float64)
+    if pos.ndim != 3 or quat.ndim != 3 or pos.shape[0] != frames or quat.shape[0] != frames:
+        raise InputError(src, "body_pos_w", f"shapes {pos.shape}, {quat.shape} do not match {frames} frames")
+    return np.concatenate([pos[:, b], quat[:, b]], axis=1)
+
+
+def _object_name(d, given: str | None) -> str:
+    if given:
+        return given
+    for n in (str(x) for x in d.get("body_names", [])):
+        if n.endswith("_link") and not any(n.startswith(p) for p in ("left_", "right_", "waist_", "torso", "pelvis")):
+            return n[: -len("_link")]
+    return "object"
+
+
+def read_beyondmimic_npz(
+    path: str | Path, *, object_geometry: ObjectGeometry | None = None, object_scale: float = 1.0,
+    object_name: str | None = None, joint_names: list[str] | None = None,
+) -> RobotClip:
+    """A BeyondMimic / mjlab motion ``.npz`` as a :class:`RobotClip` (see the module doc)."""
+    src = str(path)
+    d, _ = load_npz(path)
+    fps = _fps(d, src)
+    jp = _array(d, "joint_pos", None, src)
+    T = jp.shape[0]
+    if jp.shape[1] not in (29, 36):
+        raise InputError(src, "joint_pos", f"shape {jp.shape} is not (T, 36) or (T, 29)")
+    names = joint_names if joint_names is not None else d.get("joint_names")
+    if names is None:
+        raise InputError(src, "joint_names", "missing: the joint order is unknown; pass joint_names=")
+    joints = jp[:, -29:][:, reorder_joints(names, src)]
+    root = jp[:, :7] if jp.shape[1] == 36 else _root_from_bodies(d, src, T)
+    objects, provenance = (), {"format": "beyondmimic_npz", "file": src, "joint_order": "reordered by name to mjlab G1 order"}
+    if "object_pos_w" in d:
+        pose = np.concatenate([_array(d, "object_pos_w", 3, src, T), _array(d, "object_quat_w", 4, src, T)], axis=1)
+        name = _object_name(d, object_name)
+        if object_geometry is None:
+            warnings.warn(f"{src}: object {name!r} left out: pass object_geometry= to include it", UserWarning, stacklevel=2)
+            provenance["object_left_out"] = name
+        else:
+            geometry = object_geometry if object_scale == 1.0 else object_geometry.scaled(object_scale)
+            objects = (ObjectTrack(name, geometry, pose, source=src),)
+    return RobotClip(np.concatenate([root, joints], axis=1), fps, src, objects=objects, method="peer:beyondmimic_npz", provenance=provenance)
+
+
+def read_gmr_pkl(path: str | Path) -> RobotClip:
+    """A GMR ``.pkl`` motion as a :class:`RobotClip` (see the module doc)."""
+    src = str(path)
+    d = load_numpy_pickle(path, "file")
+    if not isinstance(d, dict):
+        raise InputError(src, "file", f"holds a {type(d).__name__}, expected a GMR dict")
+    fps = _fps(d, src)
+    dof = _array(d, "dof_pos", 29, src)
+    T = dof.shape[0]
+    root_pos, root_rot = _array(d, "root_pos", 3, src, T), _array(d, "root_rot", 4, src, T)
+    provenance = {"format": "gmr_pkl", "file": src, "joint_order": "GMR G1 29-DoF order (= mjlab)"}
+    if d.get("link_body_list") is not None:
+        provenance["link_body_list"] = [str(n) for n in d["link_body_list"]]
+    qpos = np.concatenate([root_pos, xyzw_to_wxyz(root_rot), dof], axis=1)
+    return RobotClip(qpos, fps, src, method="peer:gmr_pkl", provenance=provenance)
