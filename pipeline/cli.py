@@ -54,8 +54,11 @@ def _cmd_inspect(a: argparse.Namespace) -> int:
 
     src = Path(a.file)
     out = Path(a.out)
-    if src.suffix in (".npz", ".pkl") and a.robot:
-        print(write_robot_log(read_robot_clip(src), out))
+    if a.robot:
+        from pipeline.geometry import MeshGeometry
+
+        geometry = MeshGeometry(a.object_mesh) if a.object_mesh else None
+        print(write_robot_log(read_robot_clip(src, object_geometry=geometry), out))
         return 0
     clips = read_clips(src, body_model=a.body_model)
     for i, c in enumerate(clips):
@@ -101,6 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file")
     p.add_argument("--out", required=True, help="output .mcap path")
     p.add_argument("--robot", action="store_true", help="the file is a G1 motion (BeyondMimic .npz or GMR .pkl)")
+    p.add_argument("--object-mesh", default=None, help="with --robot: mesh of the object the motion file carries poses for")
     p.add_argument("--body-model", default=None)
     p.set_defaults(func=_cmd_inspect)
     p = sub.add_parser("load", help="load a dataset by path or hub repo id with LeRobot's loader and summarise it")

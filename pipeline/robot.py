@@ -189,3 +189,21 @@ def joint_limits() -> tuple[np.ndarray, np.ndarray]:
 def default_qpos(profile: ActuatorProfile, root_height: float = 0.76) -> np.ndarray:
     """Standing ``qpos`` (36,) at the profile's default joint pose, identity root orientation."""
     return np.concatenate([[0.0, 0.0, root_height, 1.0, 0.0, 0.0, 0.0], profile.default_joint_pos])
+
+
+def g1_pinocchio_model():
+    """Pinocchio model of the same ``g1.xml`` (its free joint becomes a free-flyer: nq 36, nv 35).
+
+    Pinocchio orders the root quaternion ``xyzw`` (see :func:`pinocchio_qpos`); its free-flyer
+    velocity is expressed in the root frame, MuJoCo's linear part in the world frame.
+    """
+    import pinocchio
+
+    return pinocchio.buildModelFromMJCF(str(g1_xml_path()))
+
+
+def pinocchio_qpos(qpos: np.ndarray) -> np.ndarray:
+    """MuJoCo ``qpos`` (root quaternion wxyz) -> Pinocchio configuration (root quaternion xyzw)."""
+    q = np.array(qpos, dtype=np.float64, copy=True)
+    q[..., 3:7] = q[..., [4, 5, 6, 3]]
+    return q

@@ -57,3 +57,16 @@ def test_folder_input_with_object(tmp_path, monkeypatch):
     assert main(["retarget", "--input", str(SHARED_MOCAP / "omomo"), "--name", "omomo"]) == 0
     ds = LeRobotDataset("lessmimic/omomo-human", root=tmp_path / "omomo" / "human")
     assert ds.num_episodes == 1 and ds.num_frames == 196
+
+
+@needs_shared
+def test_inspect_peer_robot_file_with_its_object(tmp_path):
+    from mcap.reader import make_reader
+
+    out = tmp_path / "peer.mcap"
+    npz = SHARED_MOCAP / "omniretarget" / "sub3_largebox_003_mj_w_obj.npz"
+    assert main(["inspect", str(npz), "--robot", "--object-mesh", str(SHARED_MOCAP / "omomo" / "largebox.obj"), "--out", str(out)]) == 0
+    with out.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
+    assert counts["/tf"] == 325 and counts["/scene"] == 1

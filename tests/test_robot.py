@@ -66,3 +66,25 @@ def test_joint_limits_and_torque_clip():
 def test_unknown_profile():
     with pytest.raises(ValueError, match="unknown actuator profile 'pd'"):
         actuator_profile("pd")
+
+
+def test_pinocchio_builds_the_same_model():
+    import pinocchio
+
+    from pipeline.robot import g1_pinocchio_model, pinocchio_qpos
+
+    pm = g1_pinocchio_model()
+    mj = mujoco.MjModel.from_xml_path(str(g1_xml_path()))
+    assert (pm.nq, pm.nv) == (mj.nq, mj.nv)
+    assert tuple(pm.names)[2:] == G1_JOINT_NAMES
+    assert pinocchio.computeTotalMass(pm) == pytest.approx(mj.body_mass.sum())
+    rng = np.random.default_rng(0)
+    root_quat = np.array([0.9, 0.1, -0.2, 0.3]) / np.linalg.norm([0.9, 0.1, -0.2, 0.3])
+    qpos = np.r_[0.1, -0.2, 0.8, root_quat, rng.uniform(-0.4, 0.4, 29)]
+    pd = pm.createData()
+    pinocchio.framesForwardKinematics(pm, pd, pinocchio_qpos(qpos))
+    md = mujoco.MjData(mj)
+    md.qpos[:] = qpos
+    mujoco.mj_kinematics(mj, md)
+    for body in G1_LINK_NAMES:
+        np.testing.assert_allclose(pd.oMf[pm.getFrameId(body)].translation, md.xpos[mj.body(body).id], atol=1e-9)
