@@ -17,7 +17,8 @@ LeRobot does (exact min/max/mean/std/count; quantiles the count-weighted mean of
 
 The dataset is written into a staging folder beside ``root`` and renamed into place only when
 complete, so a failure never leaves a partial dataset behind (a process killed with SIGKILL can
-leave a hidden ``.<name>.staging-<pid>-<id>`` folder, never a half-written ``<name>``).
+leave a hidden ``.<name>.staging-<pid>-<id>`` folder, never a half-written ``<name>``; the next
+write of ``<name>`` removes such folders whose process is gone).
 """
 
 from __future__ import annotations
@@ -217,6 +218,18 @@ def _commit(staging: Path, root: Path, overwrite: bool) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
+def _remove_dead_staging(root: Path) -> None:
+    """Delete ``.<name>.staging-<pid>-*`` folders left by killed writers (their pid no longer runs)."""
+    for old in root.parent.glob(f".{root.name}.staging-*-*"):
+        try:
+            pid = int(old.name.rsplit("-", 2)[1])
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            shutil.rmtree(old, ignore_errors=True)
+        except (ValueError, PermissionError):
+            continue
+
+
 def write_dataset(
     root: str | Path,
     repo_id: str,
@@ -247,6 +260,7 @@ def write_dataset(
         raise InputError(repo_id, "card fps", f"{card.fps} differs from the dataset fps {fps}")
     _check_target(root, overwrite)
     root.parent.mkdir(parents=True, exist_ok=True)
+    _remove_dead_staging(root)
     staging = root.parent / f".{root.name}.staging-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
         staging.mkdir()

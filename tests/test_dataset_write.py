@@ -2,6 +2,7 @@
 layout matches what LeRobot writes itself; bad input fails with precise errors; writes are atomic."""
 
 import json
+import os
 
 import numpy as np
 import pandas as pd
@@ -268,3 +269,17 @@ def test_failure_mid_write_leaves_nothing(tmp_path):
         write_dataset(root, "tester/ds", FPS, FEATURES, episodes(), overwrite=True)
     assert {p: p.read_bytes() for p in root.rglob("*") if p.is_file()} == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+
+
+def test_staging_left_by_a_killed_writer_is_removed(tmp_path):
+    import subprocess
+    import sys
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True)
+    pid = int(dead.stdout)
+    orphan = tmp_path / f".ds.staging-{pid}-deadbeef"
+    (orphan / "meta").mkdir(parents=True)
+    alive = tmp_path / f".ds.staging-{os.getpid()}-cafecafe"  # a writer still running: kept
+    alive.mkdir()
+    write_dataset(tmp_path / "ds", "tester/ds", FPS, FEATURES, make_episodes())
+    assert not orphan.exists() and alive.exists()

@@ -91,3 +91,20 @@ def test_bad_keypoint_files(tmp_path):
     expect_input_error(lambda: read_keypoints_csv(u), tmp_path, file=u, field="fps", match="pass fps=")
     v = _csv(tmp_path, ["frame,head_x,head_y"] + ["0,1,2"], "header.csv")
     expect_input_error(lambda: read_keypoints_csv(v, fps=30), tmp_path, file=v, field="header")
+
+
+def test_csv_time_column_must_increase_uniformly(tmp_path):
+    rows = _rows(5)
+    cells = rows[3].split(",")
+    cells[1] = "0.0100"  # frame 3 goes back in time
+    rows[3] = ",".join(cells)
+    p = _csv(tmp_path, [HEADER] + rows, "back.csv")
+    expect_input_error(lambda: read_keypoints_csv(p), tmp_path, file=p, field="time", frame=3, match="not increasing")
+    rows = _rows(5)
+    cells = rows[4].split(",")
+    cells[1] = "0.0900"  # a dropped stretch: 0, .01, .02, .03, .09
+    rows[4] = ",".join(cells)
+    q = _csv(tmp_path, [HEADER] + rows, "gap.csv")
+    expect_input_error(lambda: read_keypoints_csv(q), tmp_path, file=q, field="time", match="not uniformly sampled")
+    one = _csv(tmp_path, [HEADER] + _rows(1), "one.csv")
+    expect_input_error(lambda: read_keypoints_csv(one), tmp_path, file=one, field="time", match="at least two rows")

@@ -245,8 +245,13 @@ def read_keypoints_csv(
             raise InputError(src, f"row {k + 2}", f"not a number ({e})", frame=k) from None
     if time_col is not None:
         dt = np.diff(values[:, time_col])
-        if len(dt) == 0 or not np.all(dt > 0):
-            raise InputError(src, "time", "must increase strictly over at least two rows")
+        if len(dt) == 0:
+            raise InputError(src, "time", "needs at least two rows to give a frame rate")
+        if not np.all(dt > 0):
+            k = int(np.flatnonzero(dt <= 0)[0]) + 1
+            raise InputError(src, "time", f"is not increasing ({values[k - 1, time_col]} then {values[k, time_col]})", frame=k)
+        if np.ptp(dt) > 0.01 * np.median(dt):
+            raise InputError(src, "time", "is not uniformly sampled (resample to a fixed rate first, or pass fps=)")
         fps = 1.0 / float(np.median(dt))
     if fps is None:
         raise InputError(src, "fps", "no time column; pass fps=")
