@@ -46,6 +46,9 @@ def test_default_chain_writes_and_reloads_the_human_dataset(tmp_path, monkeypatc
     assert "--overwrite" in err and err.count("\n") == 1
     assert LeRobotDataset("lessmimic/default-human", root=root).num_frames == ds.num_frames
     assert main(["physicalize"]) == 0 and "not built yet (issue #4)" in capsys.readouterr().out
+    assert main(["load", str(root)]) == 0
+    out = capsys.readouterr().out
+    assert f"4 episodes, {ds.num_frames} frames at 30 fps" in out and "observation.joint_pos: float32 (66,)" in out
 
 
 @needs_shared
