@@ -1,0 +1,367 @@
+"""Retarget quality of a :class:`~pipeline.clip.RobotClip`, measured against OUR collision model.
+
+Every stage (and every peer's output, see :func:`evaluate_file`) is scored by this one module,
+so the numbers compare across versions and methods. The collision model is
+:func:`pipeline.scene.build_scene` with the clip's objects: the G1 ``*_collision`` geoms
+(spheres and capsules), each object's collision geoms (primitives, convex hulls or convex
+pieces) placed at its per-frame pose, and the floor plane ``z = 0``. Per frame, MuJoCo's
+``mj_kinematics`` places the geoms and ``mj_collision`` lists the penetrating pairs with their
+signed distance ``dist < 0`` (exact for these convex shapes); ``mj_geomDistance`` gives
+signed distances for pairs that are apart.
+
+Definitions (``T`` frames at ``fps``; every ``*_frac*`` is a count of frames divided by ``T``):
+
+``ground_penetration_frac_1cm`` / ``ground_penetration_max_m``
+    ``g(t)`` = height of the lowest point of any robot collision geom (sphere ``z - r``; capsule
+    ``z - |a_z| h - r``, ``a`` its unit axis, ``h`` its half-length). Depth ``max(0, -g(t))``;
+    frac: frames with depth > 1 cm; max: the largest depth (0 when none).
+``object_penetration_frac_1cm`` / ``object_penetration_max_m``
+    depth = ``-dist`` of the deepest robot-geom/object-geom contact; frac: frames deeper than
+    1 cm; max: the largest depth over the clip (0 when none).
+``float_frac_2cm``
+    with a human clip: frames where the human has a foot down (:mod:`pipeline.foot_contact`)
+    and the lowest point of BOTH robot feet (their collision capsules) is > 2 cm above ``z = 0``.
+    Without one: frames where ``g(t) > 2 cm`` and the robot is not supported by an object (no
+    pelvis/leg/foot collision geom within 2 cm of an object's collision geom).
+``foot_slide_frac_1cm_per_frame`` / ``foot_slide_speed_max_mps``
+    robot foot point = the ``left_foot`` / ``right_foot`` sites (sole centre). A foot slides
+    at frame ``t >= 1`` when it is in contact at ``t - 1`` and ``t`` and its site moved more
+    than 1 cm in ``xy`` between them; frac: frames where some foot slides (per frame, so at the
+    clip's own fps). Contact: the human's foot contact at the robot frame's time (nearest
+    human frame); without a human, the robot foot's lowest point within 2 cm of the floor
+    (height only: a speed test would hide the very slides being measured). Max: the largest
+    ``|dxy| fps`` over in-contact frame pairs (0 when none).
+``contact_preservation_frac``
+    reference contacts: the human's per-joint object-contact flags ``contacts`` for joints in
+    ``link_map`` (nearest human frame), else the robot clip's own ``contacts`` over
+    ``contact_links``. A frame is preserved when every flagged link is within 2 cm of some
+    object: signed distance from the link's collision geoms (for a hand, the hand capsule
+    around the palm site; for a link without geoms, those of its nearest descendants, e.g.
+    the upper-arm capsule for ``*_shoulder_pitch_link``) to the objects' collision geoms
+    <= 2 cm. Each clip is compared with its OWN object track. Frames
+    with no flag count as preserved. NaN when nothing can be measured (no reference contacts,
+    or flags but no object geometry).
+``joint_limit_violation_frac``
+    frames where some joint is outside its ``g1.xml`` range by more than 1e-3 rad.
+``max_joint_speed_radps``
+    ``max |q_j(t+1) - q_j(t)| fps`` over the 29 joints and all frame pairs (0 for one frame).
+``self_collision_frac``
+    frames where two robot collision geoms that MuJoCo's filter lets collide (different bodies,
+    not parent and child, not an ``<exclude>`` pair of ``g1.xml``) penetrate by > 5 mm.
+``frames``, ``fps``; ``seconds_wall`` (the producing method's wall time, NaN when unknown);
+``frames_per_s`` = ``frames / seconds_wall``.
+
+Cost: the compiled scene is cached per object set; one pass over a 325-frame clip with a mesh
+box takes ~40-60 ms. (The first G1 compile in a process costs ~3 s: MuJoCo's mesh processing.)
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from pipeline.clip import HumanClip, ObjectTrack, RobotClip
+from pipeline.foot_contact import SIDES, detect_foot_contacts
+from pipeline.geometry import MeshGeometry
+from pipeline.robot import G1_JOINT_NAMES
+from pipeline.scene import Scene, SceneObject, build_scene
+
+METRIC_KEYS: tuple[str, ...] = (
+    "ground_penetration_frac_1cm", "ground_penetration_max_m", "object_penetration_frac_1cm",
+    "object_penetration_max_m", "float_frac_2cm", "foot_slide_frac_1cm_per_frame", "foot_slide_speed_max_mps",
+    "contact_preservation_frac", "joint_limit_violation_frac", "max_joint_speed_radps", "self_collision_frac",
+    "frames", "fps", "seconds_wall", "frames_per_s",
+)  # fmt: skip
+PENETRATION_TOL = 0.01
+FLOAT_TOL = 0.02
+SLIDE_TOL = 0.01
+CONTACT_TOL = 0.02
+JOINT_LIMIT_TOL = 1e-3
+SELF_COLLISION_TOL = 0.005
+FOOT_SITES = ("left_foot", "right_foot")
+FOOT_BODIES = ("left_ankle_roll_link", "right_ankle_roll_link")
+_LOWER_BODY_ROOTS = ("pelvis",)
+
+
+def _default_link_map() -> dict[str, str]:
+    m = {"pelvis": "pelvis", "spine1": "torso_link", "spine2": "torso_link", "spine3": "torso_link",
+         "neck": "torso_link", "head": "torso_link"}  # fmt: skip
+    for s in SIDES:
+        m |= {f"{s}_hip": f"{s}_hip_yaw_link", f"{s}_knee": f"{s}_knee_link", f"{s}_ankle": f"{s}_ankle_roll_link",
+              f"{s}_foot": f"{s}_ankle_roll_link", f"{s}_collar": "torso_link", f"{s}_shoulder": f"{s}_shoulder_pitch_link",
+              f"{s}_elbow": f"{s}_elbow_link", f"{s}_wrist": f"{s}_wrist_yaw_link"}  # fmt: skip
+        for f in ("index", "middle", "pinky", "ring", "thumb"):
+            m |= {f"{s}_{f}{k}": f"{s}_wrist_yaw_link" for k in (1, 2, 3)}
+    return m
+
+
+#: SMPL / SMPL-H joint name -> G1 body whose collision geoms must match that joint's contacts.
+#: Hips map to the thigh link (what rests on a seat); fingers to the hand.
+DEFAULT_LINK_MAP: dict[str, str] = _default_link_map()
+
+
+@lru_cache(maxsize=8)
+def _scene(objects: tuple[tuple[str, object], ...]) -> Scene:
+    """The shared collision scene for these (name, geometry) objects (cached: compiling is slow)."""
+    return build_scene([SceneObject(name, geo) for name, geo in objects])
+
+
+def scene_for(objects: tuple[ObjectTrack, ...]) -> Scene:
+    return _scene(tuple((o.name, o.geometry) for o in objects))
+
+
+def _collision_geoms(m: mujoco.MjModel, body: str) -> list[int]:
+    """Collision geoms of ``body``, else of its nearest descendants that have some."""
+    try:
+        queue = deque([m.body(body).id])
+    except KeyError:
+        raise ValueError(f"{body!r} is not a G1 body") from None
+    while queue:
+        level = list(queue)
+        queue.clear()
+        geoms = [g for g in range(m.ngeom) if m.geom_contype[g] and m.geom_bodyid[g] in level]
+        if geoms:
+            return geoms
+        queue.extend(b for b in range(m.nbody) if m.body_parentid[b] in level and b not in level)
+    raise ValueError(f"G1 body {body!r} has no collision geoms below it")
+
+
+def _subtree(m: mujoco.MjModel, roots: tuple[str, ...], stop: str = "waist_yaw_link") -> set[int]:
+    """Ids of the bodies under ``roots`` whose chain up to them does not pass ``stop``."""
+    out, stop_id = set(), m.body(stop).id
+    ids = [m.body(r).id for r in roots]
+    for b in range(m.nbody):
+        a = b
+        while a > 0 and a not in ids and a != stop_id:
+            a = m.body_parentid[a]
+        if a in ids:
+            out.add(b)
+    return out
+
+
+def lowest_points(xpos: np.ndarray, xmat: np.ndarray, gtype: np.ndarray, size: np.ndarray, rbound: np.ndarray) -> np.ndarray:
+    """(..., G) height of each geom's lowest point: sphere ``z - r``, capsule ``z - |a_z| h - r``,
+    box ``z - sum_k |R_zk| s_k``, cylinder ``z - |a_z| h - r sqrt(1 - a_z^2)``; others ``z - rbound``."""
+    rz = np.abs(xmat[..., 6:9])  # row z of R: world-z component of each local axis
+    r, h = size[:, 0], size[:, 1]
+    drop = np.select(
+        [gtype == mujoco.mjtGeom.mjGEOM_SPHERE, gtype == mujoco.mjtGeom.mjGEOM_CAPSULE,
+         gtype == mujoco.mjtGeom.mjGEOM_BOX, gtype == mujoco.mjtGeom.mjGEOM_CYLINDER],
+        [np.broadcast_to(r, rz.shape[:-1]), rz[..., 2] * h + r, (rz * size).sum(-1),
+         rz[..., 2] * h + r * np.sqrt(np.clip(1 - rz[..., 2] ** 2, 0, 1))],
+        np.broadcast_to(rbound, rz.shape[:-1]),
+    )  # fmt: skip
+    return xpos[..., 2] - drop
+
+
+def _min_distance(m, d, geoms_a: list[int], geoms_b: list[int], distmax: float) -> float:
+    """Smallest signed distance between two geom sets (``distmax`` when all are farther)."""
+    best = distmax
+    for a in geoms_a:
+        for b in geoms_b:
+            best = min(best, mujoco.mj_geomDistance(m, d, a, b, distmax, None))
+    return best
+
+
+def _nearest_rows(n_target: int, fps_target: float, n_src: int, fps_src: float) -> np.ndarray:
+    """Index of the source frame nearest in time to each target frame (clipped to the source)."""
+    return np.clip(np.rint(np.arange(n_target) / fps_target * fps_src).astype(int), 0, n_src - 1)
+
+
+def _reference_contacts(robot: RobotClip, human: HumanClip | None, link_map: dict[str, str]) -> tuple[np.ndarray, list[str]] | None:
+    """(T, K) flags over K robot links, from the human (at robot frame times) or the robot's labels."""
+    if human is not None:
+        names = human.skeleton.joint_names
+        cols = [j for j, n in enumerate(names) if n in link_map]
+        if human.contacts is None or not cols:
+            return np.zeros((robot.frames, 0), bool), []
+        rows = _nearest_rows(robot.frames, robot.fps, human.frames, human.fps)
+        return human.contacts[np.ix_(rows, cols)], [link_map[names[j]] for j in cols]
+    if robot.contacts is None:
+        return None
+    return robot.contacts, list(robot.contact_links)
+
+
+@dataclass
+class _Sweep:
+    """Per-frame results of one pass over the clip (robot collision geoms ``G``)."""
+
+    model: mujoco.MjModel
+    robot_geoms: np.ndarray
+    xpos: np.ndarray  # (T, G, 3)
+    xmat: np.ndarray  # (T, G, 9)
+    sites: np.ndarray  # (T, 2, 3) left/right foot sites
+    obj_depth: np.ndarray  # (T,) deepest robot-object penetration (>= 0)
+    self_depth: np.ndarray  # (T,) deepest robot-robot penetration (>= 0)
+    supported: np.ndarray  # (T,) a pelvis/leg/foot geom within 2 cm of an object
+    preserved: np.ndarray  # (T,) every reference contact matched
+    measurable: bool  # contact preservation can be measured
+
+    def lowest(self) -> np.ndarray:
+        """(T, G) height of each robot collision geom's lowest point."""
+        m, rg = self.model, self.robot_geoms
+        return lowest_points(self.xpos, self.xmat, m.geom_type[rg], m.geom_size[rg], m.geom_rbound[rg])
+
+    def foot_heights(self, low: np.ndarray) -> np.ndarray:
+        """(T, 2) lowest point of each foot's collision geoms."""
+        body = self.model.geom_bodyid[self.robot_geoms]
+        return np.column_stack([low[:, body == self.model.body(b).id].min(axis=1) for b in FOOT_BODIES])
+
+
+def _depths(d: mujoco.MjData, kind: np.ndarray) -> tuple[float, float]:
+    """(robot-object, robot-robot) deepest penetration among ``d``'s contacts (0 when none)."""
+    n = d.ncon
+    if not n:
+        return 0.0, 0.0
+    geom, dist = d.contact.geom[:n], d.contact.dist[:n]
+    k1, k2 = kind[geom[:, 0]], kind[geom[:, 1]]
+    pairs = (((k1 == 1) & (k2 == 2)) | ((k1 == 2) & (k2 == 1)), (k1 == 1) & (k2 == 1))
+    return tuple(max(0.0, -float(dist[p].min())) if p.any() else 0.0 for p in pairs)  # type: ignore[return-value]
+
+
+def _sweep(robot: RobotClip, refs: tuple[np.ndarray, list[str]] | None, need_support: bool) -> _Sweep:
+    """Place robot and objects at every frame; collect geom poses, contacts and the distances asked for."""
+    sc = scene_for(robot.objects)
+    m, d, T = sc.model, mujoco.MjData(sc.model), robot.frames
+    rg = sc.robot_geom_ids
+    obj_bodies = set(sc.object_body_id.values())
+    og = [g for g in range(m.ngeom) if m.geom_contype[g] and m.geom_bodyid[g] in obj_bodies]
+    kind = np.zeros(m.ngeom, np.int8)
+    kind[rg], kind[og] = 1, 2
+    lower = _subtree(m, _LOWER_BODY_ROOTS)
+    lower_geoms = [g for g in rg if m.geom_bodyid[g] in lower]
+    flags, links = refs if refs is not None else (np.zeros((T, 0), bool), [])
+    link_geoms = [_collision_geoms(m, b) for b in links]
+    site_ids = [m.site(s).id for s in FOOT_SITES]
+    adr = [(sc.object_qpos_adr[o.name], o.pose) for o in robot.objects]
+    out = _Sweep(m, rg, np.empty((T, len(rg), 3)), np.empty((T, len(rg), 9)), np.empty((T, 2, 3)), np.zeros(T),
+                 np.zeros(T), np.zeros(T, bool), np.ones(T, bool), refs is not None and (bool(og) or not flags.any()))  # fmt: skip
+    for t in range(T):
+        d.qpos[:36] = robot.qpos[t]
+        for a, pose in adr:
+            d.qpos[a : a + 7] = pose[t]
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_collision(m, d)
+        out.xpos[t], out.xmat[t], out.sites[t] = d.geom_xpos[rg], d.geom_xmat[rg], d.site_xpos[site_ids]
+        out.obj_depth[t], out.self_depth[t] = _depths(d, kind)
+        if need_support and og:
+            out.supported[t] = _min_distance(m, d, lower_geoms, og, 2 * FLOAT_TOL) <= FLOAT_TOL
+        out.preserved[t] = all(bool(og) and _min_distance(m, d, link_geoms[k], og, 2 * CONTACT_TOL) <= CONTACT_TOL
+                               for k in np.flatnonzero(flags[t]))  # fmt: skip
+    return out
+
+
+def ground_clearance(robot: RobotClip) -> np.ndarray:
+    """(T,) height of the robot's lowest collision-geom point above the floor ``z = 0``."""
+    return _sweep(robot, None, need_support=False).lowest().min(axis=1)
+
+
+def _frac(flags: np.ndarray) -> float:
+    return float(np.mean(flags)) if flags.size else 0.0
+
+
+def _max(x: np.ndarray) -> float:
+    return float(np.max(x)) if x.size else 0.0
+
+
+def foot_slide(sites: np.ndarray, contact: np.ndarray, fps: float) -> tuple[float, float]:
+    """(frac of frames with a foot moving > 1 cm in xy while in contact at t-1 and t, max speed)."""
+    step = np.linalg.norm(np.diff(sites[:, :, :2], axis=0), axis=-1)  # (T-1, 2)
+    held = contact[1:] & contact[:-1]
+    slides = ((step > SLIDE_TOL) & held).any(axis=1)
+    return float(slides.sum()) / len(sites), _max(step[held]) * fps
+
+
+def joint_metrics(qpos: np.ndarray, fps: float, lower: np.ndarray, upper: np.ndarray) -> tuple[float, float]:
+    """(frac of frames with a joint beyond its range by > 1e-3 rad, max |dq/dt| by forward differences)."""
+    q = qpos[:, 7:]
+    out = ((q < lower - JOINT_LIMIT_TOL) | (q > upper + JOINT_LIMIT_TOL)).any(axis=1)
+    speed = _max(np.abs(np.diff(q, axis=0))) * fps
+    return _frac(out), speed
+
+
+def retarget_metrics(robot: RobotClip, human: HumanClip | None = None, *, link_map: dict[str, str] | None = None,
+                     seconds_wall: float | None = None) -> dict:  # fmt: skip
+    """The quality metrics of ``robot`` (keys :data:`METRIC_KEYS`; see the module doc)."""
+    link_map = DEFAULT_LINK_MAP if link_map is None else link_map
+    T, fps = robot.frames, robot.fps
+    refs = _reference_contacts(robot, human, link_map)
+    sweep = _sweep(robot, refs, need_support=human is None)
+    low = sweep.lowest()
+    ground = np.maximum(0.0, -low.min(axis=1))
+    feet_h = sweep.foot_heights(low)
+    if human is not None:
+        fc = detect_foot_contacts(human).both[_nearest_rows(T, fps, human.frames, human.fps)]
+        floating = fc.any(axis=1) & (feet_h > FLOAT_TOL).all(axis=1)
+    else:
+        fc = feet_h <= FLOAT_TOL
+        floating = (low.min(axis=1) > FLOAT_TOL) & ~sweep.supported
+    slide_frac, slide_speed = foot_slide(sweep.sites, fc, fps)
+    lo, hi = (np.array([sweep.model.jnt_range[sweep.model.joint(j).id, k] for j in G1_JOINT_NAMES]) for k in (0, 1))
+    limit_frac, speed = joint_metrics(robot.qpos, fps, lo, hi)
+    wall = float("nan") if seconds_wall is None else float(seconds_wall)
+    values = {
+        "ground_penetration_frac_1cm": _frac(ground > PENETRATION_TOL),
+        "ground_penetration_max_m": _max(ground),
+        "object_penetration_frac_1cm": _frac(sweep.obj_depth > PENETRATION_TOL),
+        "object_penetration_max_m": _max(sweep.obj_depth),
+        "float_frac_2cm": _frac(floating),
+        "foot_slide_frac_1cm_per_frame": slide_frac,
+        "foot_slide_speed_max_mps": slide_speed,
+        "contact_preservation_frac": _frac(sweep.preserved) if sweep.measurable else float("nan"),
+        "joint_limit_violation_frac": limit_frac,
+        "max_joint_speed_radps": speed,
+        "self_collision_frac": _frac(sweep.self_depth > SELF_COLLISION_TOL),
+        "frames": int(T),
+        "fps": float(fps),
+        "seconds_wall": wall,
+        "frames_per_s": T / wall if wall > 0 else float("nan"),
+    }
+    return {k: values[k] for k in METRIC_KEYS}
+
+
+def summarise(per_clip: list[dict]) -> dict:
+    """All clips at once: frame-weighted means of the fractions (over clips where finite), max of
+    the maxima, total ``frames`` and ``seconds_wall``, ``frames_per_s`` = total frames / total
+    seconds (clips with a known wall time), ``fps`` when all clips share it (else NaN), ``clips``."""
+    out: dict = {}
+    frames = np.array([c["frames"] for c in per_clip], float)
+    for k in METRIC_KEYS:
+        v = np.array([c[k] for c in per_clip], float)
+        ok = np.isfinite(v)
+        if "frac" in k:
+            w = frames[ok]
+            out[k] = float(np.dot(v[ok], w) / w.sum()) if ok.any() and w.sum() > 0 else float("nan")
+        elif "max" in k:
+            out[k] = float(v[ok].max()) if ok.any() else float("nan")
+    out["frames"] = int(frames.sum())
+    fps = {c["fps"] for c in per_clip}
+    out["fps"] = float(fps.pop()) if len(fps) == 1 else float("nan")
+    wall = np.array([c["seconds_wall"] for c in per_clip], float)
+    timed = np.isfinite(wall)
+    out["seconds_wall"] = float(wall[timed].sum()) if timed.any() else float("nan")
+    out["frames_per_s"] = float(frames[timed].sum() / wall[timed].sum()) if timed.any() and wall[timed].sum() > 0 else float("nan")
+    return {**{k: out[k] for k in METRIC_KEYS}, "clips": len(per_clip)}
+
+
+def evaluate_file(path: str | Path, *, human_path: str | Path | None = None, object_mesh: str | Path | None = None,
+                  link_map: dict[str, str] | None = None, seconds_wall: float | None = None) -> dict:  # fmt: skip
+    """Metrics of a peer's G1 motion file (BeyondMimic/OmniRetarget ``.npz``, GMR ``.pkl``).
+
+    ``object_mesh``: the object's mesh (its convex hull collides), needed for object metrics;
+    ``human_path``: the human clip it came from (its first clip), for foot contacts and contact
+    flags, aligned by time to the robot frames. The robot is scored against its OWN object
+    track (OmniRetarget scales the object's trajectory; the human's track is not used).
+    ``seconds_wall``: the peer's own run time when known (else ``frames_per_s`` is NaN).
+    """
+    from pipeline.readers import read_clips, read_robot_clip
+
+    geometry = MeshGeometry(str(object_mesh)) if object_mesh is not None else None
+    robot = read_robot_clip(path, object_geometry=geometry)
+    human = read_clips(human_path, mesh=object_mesh)[0] if human_path is not None else None
+    return retarget_metrics(robot, human, link_map=link_map, seconds_wall=seconds_wall)
