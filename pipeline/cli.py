@@ -66,6 +66,20 @@ def _cmd_inspect(a: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_evaluate_retarget(a: argparse.Namespace) -> int:
+    import json
+
+    from pipeline.ingest import write_json_atomic
+    from pipeline.metrics import evaluate_file
+
+    metrics = evaluate_file(a.file, human_path=a.human, object_mesh=a.object_mesh)
+    text = json.dumps({"file": str(a.file), **metrics}, indent=2, default=float)
+    if a.out:
+        write_json_atomic(Path(a.out), json.loads(text))
+    print(text)
+    return 0
+
+
 def _cmd_load(a: argparse.Namespace) -> int:
     from pipeline.hub import load
 
@@ -107,6 +121,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--object-mesh", default=None, help="with --robot: mesh of the object the motion file carries poses for")
     p.add_argument("--body-model", default=None)
     p.set_defaults(func=_cmd_inspect)
+    p = sub.add_parser("evaluate-retarget", help="retarget quality metrics of a G1 motion file (ours or a peer's) with our collision model")
+    p.add_argument("file", help="BeyondMimic/OmniRetarget .npz or GMR .pkl")
+    p.add_argument("--human", default=None, help="the human clip it came from (foot contacts, contact flags)")
+    p.add_argument("--object-mesh", default=None, help="mesh of the object the file carries poses for")
+    p.add_argument("--out", default=None, help="also write the metrics to this JSON file")
+    p.set_defaults(func=_cmd_evaluate_retarget)
     p = sub.add_parser("load", help="load a dataset by path or hub repo id with LeRobot's loader and summarise it")
     p.add_argument("dataset")
     p.set_defaults(func=_cmd_load)
