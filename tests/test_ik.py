@@ -1,0 +1,337 @@
+"""Retarget IK (retarget/ik.py): round trips on the G1's own forward kinematics.
+
+Targets are world poses of 14 G1 bodies along a known G1 motion (bench/bench_ik.py
+``demo_qpos``: squat, arm reach, waist twist, turn, travel), so the IK has an exact answer.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from pathlib import Path
+
+import mink
+import mujoco
+import numpy as np
+import pytest
+
+from pipeline.errors import InputError
+from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES, joint_limits
+from pipeline.scene import build_scene
+from retarget.ik import FrameVelocityLimit, G1Retargeter, SeparationLimit, solve_sequence, targets_from_qpos
+from retarget.ik_config import FloorLimit, IKConfig, ik_model, joint_velocity_limits, pairs_kept_apart_by_joint_limits, sole_offset
+from retarget.targets import IKTargets
+
+_spec = importlib.util.spec_from_file_location("bench_ik", Path(__file__).resolve().parents[1] / "bench" / "bench_ik.py")
+bench_ik = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(bench_ik)
+
+FPS = 30.0
+FRAMES = 120
+
+
+@pytest.fixture(scope="module")
+def plain():
+    return build_scene()
+
+
+@pytest.fixture(scope="module")
+def turn_motion(plain):
+    q = bench_ik.demo_qpos(plain.model, FRAMES)
+    return q, targets_from_qpos(plain.model, q, G1_LINK_NAMES, FPS)
+
+
+def body_positions(model, qpos, bodies=G1_LINK_NAMES) -> np.ndarray:
+    d, ids = mujoco.MjData(model), [model.body(b).id for b in bodies]
+    out = []
+    for q in qpos:
+        d.qpos[:36] = q
+        mujoco.mj_kinematics(model, d)
+        out.append(d.xpos[ids].copy())
+    return np.array(out)
+
+
+def contacts(scene, qpos, objects=None):
+    """Worst (most negative) contact distance per kind over a trajectory: robot-robot, robot-object, robot-floor."""
+    m, d = scene.model, mujoco.MjData(scene.model)
+    robot, floor = set(scene.robot_geom_ids.tolist()), m.geom("floor").id
+    worst = {"self": 0.0, "object": 0.0, "floor": 0.0}
+    for t, q in enumerate(qpos):
+        d.qpos[:36] = q
+        for name, pose in (objects or {}).items():
+            adr = scene.object_qpos_adr[name]
+            d.qpos[adr : adr + 7] = pose[t]
+        mujoco.mj_forward(m, d)
+        for c in d.contact[: d.ncon]:
+            r1, r2 = c.geom1 in robot, c.geom2 in robot
+            kind = "self" if r1 and r2 else "floor" if floor in (c.geom1, c.geom2) else "object" if r1 or r2 else None
+            if kind:
+                worst[kind] = min(worst[kind], c.dist)
+    return worst
+
+
+def test_sole_offset_is_the_bottom_of_the_foot_capsules(plain):
+    m = plain.model
+    g = m.geom("left_foot4_collision").id  # centre 0.025 m below the ankle_roll_link origin, radius 0.01 m
+    assert m.geom_pos[g, 2] == pytest.approx(-0.025) and m.geom_size[g, 0] == pytest.approx(0.01)
+    for body in ("left_ankle_roll_link", "right_ankle_roll_link"):
+        assert sole_offset(m, body) == pytest.approx(0.035, abs=2e-4)
+
+
+def test_ik_model_has_the_scene_geoms_and_no_object_dofs(plain):
+    scene, _ = bench_ik.box_scene(plain.model, bench_ik.demo_qpos(plain.model, 20))
+    m = ik_model(scene)
+    assert (m.nq, m.nv, m.nmocap) == (36, 35, 1)
+    names = [scene.model.geom(g).name for g in range(scene.model.ngeom)]
+    assert names == [m.geom(g).name for g in range(m.ngeom)]
+    np.testing.assert_array_equal(m.geom_size, scene.model.geom_size)
+    np.testing.assert_array_equal(m.geom_contype, scene.model.geom_contype)
+
+
+def test_recovers_a_known_motion_within_limits(plain, turn_motion):
+    q_true, targets = turn_motion
+    ik = G1Retargeter(plain, IKConfig())
+    q = ik.retarget(targets)
+    assert q.shape == (FRAMES, 36) and np.isfinite(q).all()
+    err = np.linalg.norm(body_positions(plain.model, q) - body_positions(plain.model, q_true), axis=-1)
+    assert err.max() < 0.01, f"body position error {err.max():.4f} m"
+    lo, hi = joint_limits()
+    assert (q[:, 7:] >= lo - 1e-6).all() and (q[:, 7:] <= hi + 1e-6).all()
+    vmax = np.array([joint_velocity_limits(ik.config.velocity_limit_factor)[j] for j in G1_JOINT_NAMES])
+    assert (np.abs(np.diff(q[:, 7:], axis=0)) * FPS <= vmax + 1e-6).all()
+    worst = contacts(plain, q)
+    assert worst["self"] > -0.005 and worst["floor"] > -0.01, worst
+    assert ik.stats["qp_solves"] <= ik.config.init_iterations + ik.config.iterations * (FRAMES - 1)
+
+
+@pytest.mark.parametrize("pelvis_rot_weight", [0.1, 0.0])
+def test_start_facing_backwards_far_from_the_default_pose(plain, pelvis_rot_weight):
+    """Frame 0 at 180 deg yaw in a deep squat with the arm raised: no collapsed or stuck first frame."""
+    q_true = bench_ik.demo_qpos(plain.model, 40, yaw0=math.pi, turn=0.0, travel=0.0, squat=0.5)
+    q_true = q_true[10:]  # starts deep in the squat, right arm up
+    rot = np.full(len(G1_LINK_NAMES), 0.1)
+    rot[G1_LINK_NAMES.index("pelvis")] = pelvis_rot_weight
+    targets = targets_from_qpos(plain.model, q_true, G1_LINK_NAMES, FPS, rot_weight=rot)
+    q = solve_sequence(targets, plain, None, IKConfig())
+    err = np.linalg.norm(body_positions(plain.model, q) - body_positions(plain.model, q_true), axis=-1)
+    assert err[0].max() < 0.02 and err.max() < 0.02, err.max(axis=1)
+    yaw = 2 * np.arctan2(q[:, 6], q[:, 3])
+    assert np.all(np.abs(np.cos(yaw) + 1.0) < 0.01)  # heading stays at 180 deg
+
+
+def _feet(model, q):
+    """Per frame and foot: ankle xy, sole height (lowest capsule point), tilt of the sole normal."""
+    d = mujoco.MjData(model)
+    ids = [model.body(b).id for b in ("left_ankle_roll_link", "right_ankle_roll_link")]
+    caps = [[g for g in range(model.ngeom) if model.geom_bodyid[g] == b and model.geom_contype[g]] for b in ids]
+    xy, sole, tilt = [], [], []
+    for qt in q:
+        d.qpos[:36] = qt
+        mujoco.mj_kinematics(model, d)
+        xy.append(d.xpos[ids, :2].copy())
+        sole.append([bench_ik._sole_height(model, d, c) for c in caps])
+        tilt.append([math.acos(min(1.0, d.xmat[b, 8])) for b in ids])
+    return np.array(xy), np.array(sole), np.array(tilt)
+
+
+@pytest.mark.parametrize("anchor", ["target", "robot"])
+def test_feet_in_contact_are_pinned_flat_on_the_ground(plain, anchor):
+    """Foot targets drift 3 cm and bob 2 cm during contact: the robot feet neither slide nor float nor sink."""
+    T = 90
+    q_true = bench_ik.demo_qpos(plain.model, T, turn=0.0, travel=0.0)
+    contact = np.ones((T, 2), bool)
+    contact[:15, 1] = False  # right foot lands at frame 15
+    targets = targets_from_qpos(plain.model, q_true, G1_LINK_NAMES, FPS, foot_contact=contact)
+    pos = targets.pos.copy()
+    s = np.linspace(0, 1, T)[:, None]
+    for k in (G1_LINK_NAMES.index("left_ankle_roll_link"), G1_LINK_NAMES.index("right_ankle_roll_link")):
+        pos[:, k, 0] += 0.03 * s[:, 0]
+        pos[:, k, 2] += 0.02 * np.sin(6 * math.pi * s[:, 0])
+    pos[:15, G1_LINK_NAMES.index("right_ankle_roll_link"), 2] += 0.05 * (1 - s[:15, 0] / s[15, 0])  # swing down
+    targets = IKTargets(targets.body_names, pos, targets.quat, targets.pos_weight, targets.rot_weight, FPS, 1.0, contact)
+    q = G1Retargeter(plain, IKConfig(pin_anchor=anchor)).retarget(targets)
+    xy, sole, tilt = _feet(plain.model, q)
+    for side in (0, 1):
+        on = contact[:, side]
+        steps = np.linalg.norm(np.diff(xy[:, side], axis=0), axis=-1)[on[1:] & on[:-1]]
+        assert steps.max() < 0.002, f"foot {side} slides {steps.max():.4f} m/frame"
+        assert np.abs(sole[on, side]).max() < 0.003 and tilt[on, side].max() < 0.02
+    assert sole.min() > -0.01  # never below ground (swinging foot included)
+
+
+def test_marching_feet_pinned_in_stance_and_free_in_swing(plain):
+    q_true, contact = bench_ik.march_qpos(plain.model, 120, steps=4)
+    assert contact.all(axis=1).any() and not contact[:, 0].all() and not contact[:, 1].all()
+    targets = targets_from_qpos(plain.model, q_true, G1_LINK_NAMES, FPS, foot_contact=contact)
+    q = G1Retargeter(plain, IKConfig()).retarget(targets)
+    err = np.linalg.norm(body_positions(plain.model, q) - body_positions(plain.model, q_true), axis=-1)
+    assert err.max() < 0.01, err.max()  # the swing foot follows its target (stance pins sit <= 5 mm off it)
+    xy, sole, _ = _feet(plain.model, q)
+    for side in (0, 1):
+        stay = contact[1:, side] & contact[:-1, side]
+        assert np.linalg.norm(np.diff(xy[:, side], axis=0), axis=-1)[stay].max() < 0.002
+        assert np.abs(sole[contact[:, side], side]).max() < 0.003
+    assert sole.min() > -0.01 and sole.min(axis=1).max() < 0.02  # never sunk, never both feet up
+
+
+def test_box_in_the_hands_way_is_not_penetrated(plain):
+    q_true = bench_ik.demo_qpos(plain.model, FRAMES)
+    targets = targets_from_qpos(plain.model, q_true, G1_LINK_NAMES, FPS)
+    scene, box = bench_ik.box_scene(plain.model, q_true, depth=0.05)
+    assert contacts(scene, q_true, {"box": box})["object"] < -0.04  # the targets do push into the box
+    ik = G1Retargeter(scene, IKConfig())
+    q = ik.retarget(targets, {"box": box})
+    worst = contacts(scene, q, {"box": box})
+    assert worst["object"] > -0.01 and worst["self"] > -0.005 and worst["floor"] > -0.01, worst
+    vmax = np.array([joint_velocity_limits(ik.config.velocity_limit_factor)[j] for j in G1_JOINT_NAMES])
+    speed = np.abs(np.diff(q[:, 7:], axis=0)) * FPS
+    assert (speed <= vmax + 1e-6).all()
+    v = np.diff(q[:, 7:], axis=0) * FPS
+    chatter = (np.sign(v[1:]) != np.sign(v[:-1])) & (np.abs(v[1:]) > 2.0) & (np.abs(v[:-1]) > 2.0)
+    assert not chatter.any() and speed.max() < 8.0  # the blocked arm does not oscillate (motion: <= 1.6 rad/s)
+    np.testing.assert_allclose(ik.configuration.data.mocap_pos[0], box[-1, :3])
+
+
+def test_joint_speed_limit_holds_for_a_target_jump(plain, turn_motion):
+    q_true, targets = turn_motion
+    pos = targets.pos.copy()
+    pos[60:, G1_LINK_NAMES.index("right_wrist_yaw_link")] += [0.0, -0.2, 0.3]  # teleporting hand
+    jumped = IKTargets(targets.body_names, pos, targets.quat, targets.pos_weight, targets.rot_weight, FPS, 1.0)
+    config = IKConfig(velocity_limit_factor=0.2, iterations=3)
+    q = solve_sequence(jumped, plain, None, config)
+    vmax = np.array([joint_velocity_limits(0.2)[j] for j in G1_JOINT_NAMES])
+    speed = np.abs(np.diff(q[:, 7:], axis=0)) * FPS
+    assert (speed <= vmax + 1e-6).all() and (speed / vmax).max() > 0.99  # the limit binds and holds
+
+
+def test_deterministic(plain, turn_motion):
+    _, targets = turn_motion
+    a = solve_sequence(targets, plain, None, IKConfig())
+    b = solve_sequence(targets, plain, None, IKConfig())
+    np.testing.assert_array_equal(a, b)
+
+
+def test_nan_target_is_an_input_error_naming_clip_and_frame(plain, turn_motion):
+    _, targets = turn_motion
+    pos = targets.pos.copy()
+    pos[7, 3, 1] = np.nan
+    bad = IKTargets(targets.body_names, pos, targets.quat, targets.pos_weight, targets.rot_weight, FPS, 1.0)
+    with pytest.raises(InputError, match=r"^clip\.npz: frame 7: IK target pos"):
+        solve_sequence(bad, plain, None, IKConfig(), source="clip.npz")
+
+
+def test_divergence_is_an_input_error_naming_the_frame(plain, turn_motion, monkeypatch):
+    _, targets = turn_motion
+    ik = G1Retargeter(plain, IKConfig())
+    calls = {"n": 0}
+    real = mink.solve_ik
+
+    def flaky(*args, **kwargs):
+        calls["n"] += 1
+        v = real(*args, **kwargs)
+        return v * np.nan if calls["n"] > ik.config.init_iterations + 2 * 4 else v
+
+    monkeypatch.setattr(mink, "solve_ik", flaky)
+    with pytest.raises(InputError, match=r"^walk\.bvh: frame \d+: qpos: IK diverged"):
+        ik.retarget(targets, source="walk.bvh")
+
+
+def test_bad_names_are_rejected(plain, turn_motion):
+    _, targets = turn_motion
+    with pytest.raises(ValueError, match="free objects"):
+        solve_sequence(targets, plain, {"chair": np.zeros((FRAMES, 7))}, IKConfig())
+    odd = IKTargets(("pelvis", "left_hand"), targets.pos[:, :2], targets.quat[:, :2], np.ones(2), np.ones(2), FPS, 1.0)
+    with pytest.raises(ValueError, match="left_hand"):
+        solve_sequence(odd, plain, None, IKConfig())
+    with pytest.raises(ValueError, match="iterations"):
+        IKConfig(iterations=0)
+
+
+def _rate_of_distance(model, data, g1, g2, dq):
+    """Finite-difference change of the signed distance of (g1, g2) along the tangent step ``dq``."""
+    q0 = data.qpos.copy()
+    d0 = mujoco.mj_geomDistance(model, data, g1, g2, 1.0, None)
+    q1 = q0.copy()
+    mujoco.mj_integratePos(model, q1, dq, 1.0)
+    data.qpos[:] = q1
+    mujoco.mj_kinematics(model, data)
+    d1 = mujoco.mj_geomDistance(model, data, g1, g2, 1.0, None)
+    data.qpos[:] = q0
+    mujoco.mj_kinematics(model, data)
+    return d1 - d0
+
+
+@pytest.mark.parametrize("lift", [0.02, -0.004])  # foot above the floor / sunk into it
+def test_separation_limit_rows_are_distance_rates_and_push_out(plain, lift):
+    m = plain.model
+    cfg = mink.Configuration(m, bench_ik.demo_qpos(m, 2, turn=0.0, travel=0.0)[0])
+    cfg.data.qpos[2] += lift
+    cfg.update()
+    floor, foot = m.geom("floor").id, m.geom("left_foot4_collision").id
+    lim = SeparationLimit(m, [([foot], [floor])], gain=0.5, minimum_distance_from_collisions=0.0, collision_detection_distance=0.05)
+    G, h = lim.compute_qp_inequalities(cfg, 1.0)
+    d = mujoco.mj_geomDistance(m, cfg.data, floor, foot, 1.0, None)
+    assert G.shape == (1, m.nv) and h[0] == pytest.approx(0.5 * d)
+    dq = np.zeros(m.nv)
+    dq[2] = 1e-4  # raise the root: the distance grows at the row's rate
+    assert -(G[0] @ dq) == pytest.approx(_rate_of_distance(m, cfg.data, floor, foot, dq), rel=1e-3)
+    lim.relaxed = True
+    assert lim.compute_qp_inequalities(cfg, 1.0).h[0] == pytest.approx(max(0.5 * d, 0.0))
+
+
+def test_pelvis_is_checked_against_objects_and_floor(plain):
+    scene, _ = bench_ik.box_scene(plain.model, bench_ik.demo_qpos(plain.model, 20))
+    m = ik_model(scene)
+    pelvis, box, floor = m.geom("pelvis_collision").id, m.geom("box_col0").id, m.geom("floor").id
+    lim = SeparationLimit(m, [([pelvis], [box, floor])])
+    assert sorted(lim.geom_id_pairs) == sorted([(min(pelvis, box), max(pelvis, box)), (min(pelvis, floor), max(pelvis, floor))])
+    excluded = SeparationLimit(m, [([pelvis], [m.geom("left_hip_collision").id])])  # <exclude> in g1.xml
+    assert excluded.geom_id_pairs == []
+
+
+def test_frame_velocity_limit_bounds_the_whole_frame(plain):
+    m = plain.model
+    cfg = mink.Configuration(m, bench_ik.demo_qpos(m, 2)[0])
+    lim = FrameVelocityLimit(m, {"left_knee_joint": 10.0}, dt=0.1)
+    lim.start_frame(cfg.q)
+    assert lim.compute_qp_inequalities(cfg, 1.0).h == pytest.approx([1.0, 1.0])
+    q = cfg.q.copy()
+    q[7 + G1_JOINT_NAMES.index("left_knee_joint")] += 0.4
+    cfg.update(q)
+    assert lim.compute_qp_inequalities(cfg, 1.0).h == pytest.approx([0.6, 1.4])
+
+
+@pytest.mark.parametrize("lift", [0.03, 0.0, -0.004])
+def test_floor_limit_matches_mujoco_distances(plain, lift):
+    m = plain.model
+    q = bench_ik.demo_qpos(m, 40, turn=0.0, travel=0.0)[10]  # squatting: tilted shins, level feet
+    q[2] += lift
+    q[3:7] = [math.cos(0.05), math.sin(0.05), 0.0, 0.0]  # rolled 0.1 rad: feet on an edge
+    cfg = mink.Configuration(m, q)
+    floor = m.geom("floor").id
+    geoms = [m.geom(n).id for n in ("left_foot1_collision", "left_foot4_collision", "right_shin_collision", "pelvis_collision")]
+    lim = FloorLimit(m, geoms, floor, gain=1.0, minimum_distance=0.0, detection_distance=10.0)
+    G, h = lim.compute_qp_inequalities(cfg, 1.0)
+    assert G.shape == (8, m.nv)  # both ends of every capsule, the sphere twice
+    for k, g in enumerate(geoms):
+        assert min(h[k], h[k + 4]) == pytest.approx(mujoco.mj_geomDistance(m, cfg.data, floor, g, 10.0, None), abs=1e-9)
+    rng = np.random.default_rng(0)
+    dq = 1e-5 * rng.standard_normal(m.nv)
+    q1 = cfg.q.copy()
+    mujoco.mj_integratePos(m, q1, dq, 1.0)
+    h1 = lim.compute_qp_inequalities(mink.Configuration(m, q1), 1.0).h
+    np.testing.assert_allclose(-(G @ dq), h1 - h, atol=1e-9)  # rows are the distance rates
+
+
+def test_pairs_kept_apart_by_joint_limits_are_the_ankle_ones(plain):
+    m = plain.model
+    lim = SeparationLimit(m, [(list(plain.robot_geom_ids), list(plain.robot_geom_ids))], skip_kept_apart=False)
+    kept = pairs_kept_apart_by_joint_limits(m, lim.geom_id_pairs)
+    names = {(m.geom(a).name, m.geom(b).name) for a, b in kept}
+    assert len(names) == 28 and all(("shin" in a or "brace" in a) and "foot" in b and a[:4] == b[:4] for a, b in names)
+    brace, foot = m.geom("left_linkage_brace_collision").id, m.geom("left_foot5_collision").id
+    d, (p, r) = mujoco.MjData(m), (m.joint("left_ankle_pitch_joint"), m.joint("left_ankle_roll_joint"))
+    d.qpos[p.qposadr[0]], d.qpos[r.qposadr[0]] = m.jnt_range[p.id, 0], m.jnt_range[r.id, 1]  # the closest corner
+    mujoco.mj_kinematics(m, d)
+    assert 0.0 < mujoco.mj_geomDistance(m, d, brace, foot, 1.0, None) < 0.01
+    assert len(SeparationLimit(m, [(list(plain.robot_geom_ids), list(plain.robot_geom_ids))], skip_kept_apart=True).geom_id_pairs) == len(lim.geom_id_pairs) - 28
