@@ -9,6 +9,7 @@ CLI    := $(VENV)/bin/lessmimic
 NAME   ?= default
 INPUT  ?=
 STAGE_ARGS = --name $(NAME) $(if $(INPUT),--input $(INPUT)) $(if $(OVERWRITE),--overwrite)
+JOBS ?= 1
 
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
@@ -27,7 +28,7 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 	touch $@
 
 retarget: install
-	$(CLI) retarget $(STAGE_ARGS)
+	$(CLI) retarget $(STAGE_ARGS) -j $(JOBS)
 
 physicalize: install
 	$(CLI) physicalize $(STAGE_ARGS)

@@ -16,7 +16,6 @@ from pathlib import Path
 from pipeline.errors import InputError
 
 _NOT_YET = {
-    "retarget": 3,
     "physicalize": 4,
     "features": 5,
 }
@@ -30,12 +29,16 @@ def _stage_args(p: argparse.ArgumentParser) -> None:
 
 
 def _cmd_retarget(a: argparse.Namespace) -> int:
-    from pipeline.ingest import ingest
+    from retarget.stage import run_stage
 
-    res = ingest(a.input, a.name, overwrite=a.overwrite, body_model=a.body_model)
-    print(f"ingested {len(res.clips)} clip(s), {res.report['frames']} frames -> {res.dataset} (reloaded with LeRobotDataset)")
-    print(f"retarget: the G1 retargeting algorithm is not built yet (issue #{_NOT_YET['retarget']}); datasets/{a.name}/retargeted/ was not written")
-    return 0
+    report = run_stage(a.input, a.name, overwrite=a.overwrite, jobs=a.jobs, body_model=a.body_model, height_override=a.height)
+    s = report["summary"]
+    print(f"retargeted {len(report['clips'])} clip(s), {len(report['failed'])} failed -> datasets/{a.name}/retargeted/")
+    for k in ("object_penetration_frac_1cm", "ground_penetration_frac_1cm", "float_frac_2cm", "foot_slide_frac_1cm_per_frame",
+              "contact_preservation_frac", "joint_limit_violation_frac", "frames_per_s"):  # fmt: skip
+        if k in s:
+            print(f"  {k}: {s[k]:.4g}")
+    return 1 if report["failed"] and not report["clips"] else 0
 
 
 def _cmd_later_stage(a: argparse.Namespace) -> int:
@@ -107,8 +110,10 @@ def _cmd_merge(a: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="lessmimic", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("retarget", help="mocap -> G1 clips (datasets/<NAME>/retargeted/); ingests the input into datasets/<NAME>/human/")
+    p = sub.add_parser("retarget", help="mocap -> G1 clips by mink IK (datasets/<NAME>/retargeted/); the ingested human clips go to datasets/<NAME>/human/")
     _stage_args(p)
+    p.add_argument("-j", "--jobs", type=int, default=1, help="worker processes over clips (default 1)")
+    p.add_argument("--height", type=float, default=None, help="subject height override in metres (outside 1.0-2.3 m needs it)")
     p.set_defaults(func=_cmd_retarget)
     for stage, what in (("physicalize", "retargeted clips -> simulated state-action data"), ("features", "physicalized data -> distance-field features")):
         p = sub.add_parser(stage, help=what)

@@ -39,12 +39,17 @@ def test_default_chain_writes_and_reloads_the_human_dataset(tmp_path, monkeypatc
     assert sorted(c["task"] for c in report["clips"]) == ["Carry", "PickUp", "Push", "SitStand"]
     assert "SYNTHETIC" in (root / "README.md").read_text()
     assert len(list((tmp_path / "default" / "logs" / "human").glob("*.mcap"))) == 4
+    robot = LeRobotDataset("lessmimic/default-retargeted", root=tmp_path / "default" / "retargeted")
+    assert robot.num_episodes == 4 and robot.fps == 50
+    assert len(list((tmp_path / "default" / "logs" / "retargeted").glob("*.mcap"))) == 4
     # A second run refuses to overwrite, with one line, and leaves the dataset intact.
     capsys.readouterr()
     assert main(["retarget"]) == 2
     err = capsys.readouterr().err
     assert "--overwrite" in err and err.count("\n") == 1
     assert LeRobotDataset("lessmimic/default-human", root=root).num_frames == ds.num_frames
+    # With --overwrite the finished clips come from the resume cache.
+    assert main(["retarget", "--overwrite"]) == 0
     assert main(["physicalize"]) == 0 and "not built yet (issue #4)" in capsys.readouterr().out
     assert main(["load", str(root)]) == 0
     out = capsys.readouterr().out
@@ -60,6 +65,8 @@ def test_folder_input_with_object(tmp_path, monkeypatch):
     assert main(["retarget", "--input", str(SHARED_MOCAP / "omomo"), "--name", "omomo"]) == 0
     ds = LeRobotDataset("lessmimic/omomo-human", root=tmp_path / "omomo" / "human")
     assert ds.num_episodes == 1 and ds.num_frames == 196
+    robot = LeRobotDataset("lessmimic/omomo-retargeted", root=tmp_path / "omomo" / "retargeted")
+    assert robot.num_episodes == 1 and robot.fps == 50
 
 
 @needs_shared

@@ -1,0 +1,399 @@
+"""Which human joint drives which G1 body (per-skeleton data files), and the rotation offsets
+between their frames, computed from a standing reference pose.
+
+Mapping files (``retarget/mappings/*.json``, one per skeleton family)::
+
+    {"name": "smpl", "description": "...", "required": ["pelvis", "left_hip", ...], "links":
+     {"left_ankle_roll_link": {"joint": "left_ankle", "aim": "left_foot", "pos_weight": 1.0, "rot_weight": 0.5}, ...}}
+
+``required``: joints that identify the skeleton; ``joint``: the human joint the body follows;
+``aim``: a joint giving the segment direction ``aim - joint`` (``"-elbow"``: ``joint - elbow``);
+``joint``/``aim`` may list candidates (first present wins); weights: the IK task costs. Files are
+tried most specific first (most required joints, then name). The part each G1 body plays is the
+G1's structure (:data:`G1_ROLES`); the G1 is measured at ``q = 0`` by FK (:func:`g1_rest`).
+
+Rotation offsets. A segment frame ``G = frame_from(a, b)`` is built from two directions by the
+same recipe for human and G1 (:func:`segment_frames`). For body ``k`` driven by joint ``j``::
+
+    O_k = D_k(ref)^T  G_h,k(ref)  G_r,k^T  R_r,k,        target  R_k(t) = D_k(t) O_k
+
+``D_k`` the driver (the joint's global rotation, or a frame from positions), ``G_h`` the human
+segment frame in the reference pose, ``G_r``/``R_r`` the G1's segment frame/body rotation at
+``q = 0``. Segment directions carry over exactly; in the reference pose every target is the G1's
+``q = 0`` rotation (up to the heading) where the human segment is posed like the G1's.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.clip import Skeleton
+from pipeline.errors import InputError
+
+MAPPINGS_DIR = Path(__file__).with_name("mappings")
+SIDES = ("left", "right")
+Z = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass(frozen=True)
+class LinkMap:
+    """One G1 body driven by one human joint; segment direction ``aim_sign (p[aim] - p[joint])``."""
+
+    body: str
+    joint: str
+    aim: str
+    aim_sign: float
+    pos_weight: float
+    rot_weight: float
+
+
+@dataclass(frozen=True)
+class Mapping:
+    """A mapping file resolved for one skeleton."""
+
+    name: str
+    path: str
+    required: tuple[str, ...]
+    links: tuple[LinkMap, ...]
+    description: str = ""
+
+    @property
+    def body_names(self) -> tuple[str, ...]:
+        return tuple(link.body for link in self.links)
+
+    def link(self, body: str) -> LinkMap:
+        return next(link for link in self.links if link.body == body)
+
+    def body_of_kind(self, kind: str, side: str | None = None) -> str | None:
+        """The mapped body playing ``kind`` (on ``side``), or None."""
+        return next((b for b in self.body_names if (G1_ROLES[b].kind, G1_ROLES[b].side) == (kind, side)), None)
+
+
+@dataclass(frozen=True)
+class BodyRole:
+    """The part a G1 body plays: ``kind`` (pelvis, torso, thigh, shank, foot, upper_arm, forearm,
+    hand); ``group``, its scale and anchor (``leg``: about the ground point, ``trunk``: from the
+    pelvis target, ``arm``: from the same side's upper-arm target); ``offset_frame``, the body whose
+    target frame carries its position offset (None: none); ``robot_aim``, G1 bodies or sites whose
+    mean is the G1's counterpart of the human ``aim``; ``offset_body``, whose offset it takes
+    (None: its own; knees and feet move with their hip)."""
+
+    kind: str
+    side: str | None
+    group: str
+    offset_frame: str | None
+    robot_aim: tuple[str, ...]
+    offset_body: str | None = None
+
+
+def _g1_roles() -> dict[str, BodyRole]:
+    roles = {"pelvis": BodyRole("pelvis", None, "leg", "pelvis", ("torso_link",)),
+             "torso_link": BodyRole("torso", None, "trunk", "torso_link", ("left_shoulder_roll_link", "right_shoulder_roll_link"))}  # fmt: skip
+    for s in SIDES:
+        hip = f"{s}_hip_pitch_link"
+        roles[hip] = BodyRole("thigh", s, "leg", "pelvis", (f"{s}_knee_link",))
+        roles[f"{s}_knee_link"] = BodyRole("shank", s, "leg", "pelvis", (f"{s}_ankle_roll_link",), hip)
+        roles[f"{s}_ankle_roll_link"] = BodyRole("foot", s, "leg", "pelvis", (f"site:{s}_foot",), hip)
+        for b in (f"{s}_shoulder_pitch_link", f"{s}_shoulder_roll_link"):
+            roles[b] = BodyRole("upper_arm", s, "trunk", "torso_link", (f"{s}_elbow_link",))
+        roles[f"{s}_elbow_link"] = BodyRole("forearm", s, "arm", None, (f"{s}_wrist_yaw_link",))
+        roles[f"{s}_wrist_yaw_link"] = BodyRole("hand", s, "arm", None, (f"site:{s}_palm",))
+    return roles
+
+
+#: Every G1 body a mapping file may drive, and its part.
+G1_ROLES: dict[str, BodyRole] = _g1_roles()
+#: Bodies every mapping must drive (pelvis frame, floor and leg scale need them).
+CORE_BODIES = ("pelvis", "torso_link") + tuple(f"{s}_{b}" for s in SIDES for b in ("hip_pitch_link", "knee_link", "ankle_roll_link"))
+
+
+@dataclass(frozen=True)
+class G1Rest:
+    """The G1 at ``q = 0`` on ``z = 0``: ``pos`` of bodies and ``site:<name>`` sites, body ``rot``;
+    ``sole``: the lowest foot collision point before that shift; ``height``: the top of the head."""
+
+    pos: dict[str, np.ndarray]
+    rot: dict[str, np.ndarray]
+    sole: float
+    height: float
+
+
+def _geom_extent(model, data, g: int, sign: float = -1.0) -> float:
+    """Lowest (``sign=-1``) or highest world z of geom ``g``: exact for spheres and capsules
+    (radius, half-length along local z), its local bounding box otherwise."""
+    import mujoco
+
+    R, c, size = data.geom_xmat[g].reshape(3, 3), data.geom_xpos[g, 2], model.geom_size[g]
+    if model.geom_type[g] in (mujoco.mjtGeom.mjGEOM_SPHERE, mujoco.mjtGeom.mjGEOM_CAPSULE):
+        half = size[1] if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE else 0.0
+        return float(c + sign * (size[0] + half * abs(R[2, 2])))
+    return float(c + R[2] @ model.geom_aabb[g, :3] + sign * np.abs(R[2]) @ model.geom_aabb[g, 3:])
+
+
+@functools.lru_cache(maxsize=1)
+def g1_rest() -> G1Rest:
+    """Forward kinematics of ``g1.xml`` at ``q = 0`` (identity root), shifted so the soles touch ``z = 0``."""
+    import mujoco
+
+    from pipeline.robot import g1_xml_path
+
+    model = mujoco.MjModel.from_xml_path(str(g1_xml_path()))
+    mujoco.mj_forward(model, data := mujoco.MjData(model))
+    collide = [g for g in range(model.ngeom) if model.geom_contype[g] or model.geom_conaffinity[g]]
+    feet = {model.body(f"{s}_ankle_roll_link").id for s in SIDES}
+    sole = min(_geom_extent(model, data, g) for g in collide if model.geom_bodyid[g] in feet)
+    shift = np.array([0.0, 0.0, sole])
+    pos = {model.body(b).name: data.xpos[b] - shift for b in range(1, model.nbody)}
+    pos.update({f"site:{model.site(s).name}": data.site_xpos[s] - shift for s in range(model.nsite)})
+    rot = {model.body(b).name: data.xmat[b].reshape(3, 3).copy() for b in range(1, model.nbody)}
+    top = max(_geom_extent(model, data, g, 1.0) for g in collide)
+    return G1Rest(pos, rot, float(sole), float(top - sole))
+
+
+def g1_points(mapping: Mapping) -> dict[str, np.ndarray]:
+    """The G1's :func:`human_points` at ``q = 0``: body origins, and aim points (means of ``robot_aim``)."""
+    rest = g1_rest()
+    P = {b: rest.pos[b][None] for b in mapping.body_names}
+    P.update({b + ">": np.mean([rest.pos[a] for a in G1_ROLES[b].robot_aim], axis=0)[None] for b in mapping.body_names})
+    return P
+
+
+def human_points(joint_pos: np.ndarray, skeleton: Skeleton, mapping: Mapping) -> dict[str, np.ndarray]:
+    """``P[body]``: the driving joint's positions ``(T, 3)``; ``P[body + ">"]``: the joint moved
+    along its segment direction, ``p[joint] + aim_sign (p[aim] - p[joint])``."""
+    P = {}
+    for link in mapping.links:
+        p = joint_pos[:, skeleton.index(link.joint)]
+        P[link.body], P[link.body + ">"] = p, p + link.aim_sign * (joint_pos[:, skeleton.index(link.aim)] - p)
+    return P
+
+
+def _names(value, path: Path, field: str) -> list[str]:
+    names = [value] if isinstance(value, str) else value
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) and n.lstrip("-") for n in names):
+        raise InputError(path, field, f"must be a joint name or a non-empty list of names, got {value!r}")
+    return names
+
+
+def read_spec(path: Path) -> dict:
+    """A mapping file, checked (:class:`InputError` naming the file and the field)."""
+    try:
+        spec = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as e:
+        raise InputError(path, "file", f"not a readable JSON mapping ({e})") from None
+    if not isinstance(spec, dict) or not isinstance(spec.get("links"), dict):
+        raise InputError(path, "links", "missing: a mapping file needs a 'links' object {G1 body: {...}}")
+    links = {}
+    for body, e in spec["links"].items():
+        where = f"links.{body}"
+        if body not in G1_ROLES or not isinstance(e, dict):
+            raise InputError(path, where, f"must be one of the G1 bodies {', '.join(G1_ROLES)}, mapped to an object")
+        for w in ("pos_weight", "rot_weight"):
+            if not isinstance(e.get(w), (int, float)) or not np.isfinite(e[w]) or e[w] < 0:
+                raise InputError(path, f"{where}.{w}", f"must be a non-negative number, got {e.get(w)!r}")
+        links[body] = {"joint": _names(e.get("joint"), path, f"{where}.joint"), "aim": _names(e.get("aim"), path, f"{where}.aim"),
+                       "pos_weight": float(e["pos_weight"]), "rot_weight": float(e["rot_weight"])}  # fmt: skip
+    missing = [b for b in CORE_BODIES if b not in links]
+    if missing:
+        raise InputError(path, "links", f"must drive {', '.join(missing)} (pelvis, torso and both legs are needed)")
+    roles = [G1_ROLES[b] for b in links]
+    hanging = {r.side for r in roles if r.group == "arm"} - {r.side for r in roles if r.kind == "upper_arm"}
+    if hanging:
+        raise InputError(path, "links", f"the {', '.join(sorted(hanging))} elbow/wrist need a shoulder link to hang from")
+    return {"name": str(spec.get("name", Path(path).stem)), "description": str(spec.get("description", "")),
+            "required": tuple(_names(spec.get("required"), path, "required")), "links": links}  # fmt: skip
+
+
+def mapping_files() -> list[Path]:
+    """The shipped mapping files, most specific first (most required joints, then by name)."""
+    return sorted(MAPPINGS_DIR.glob("*.json"), key=lambda p: (-len(read_spec(p)["required"]), p.name))
+
+
+def _resolve(spec: dict, path: Path, names: set[str]) -> Mapping | list[str]:
+    """The mapping for a skeleton with joint ``names``, or what it misses."""
+    missing = [n for n in spec["required"] if n not in names]
+    links = []
+    for body, e in spec["links"].items():
+        joint = next((n for n in e["joint"] if n in names), None)
+        aim = next((n for n in e["aim"] if n.lstrip("-") in names), None)
+        missing += [" or ".join(c.lstrip("-") for c in e[k]) for k, v in (("joint", joint), ("aim", aim)) if v is None]
+        if joint is not None and aim is not None:
+            sign = -1.0 if aim.startswith("-") else 1.0
+            links.append(LinkMap(body, joint, aim.lstrip("-"), sign, e["pos_weight"], e["rot_weight"]))
+    if missing:
+        return list(dict.fromkeys(missing))
+    return Mapping(spec["name"], str(path), spec["required"], tuple(links), spec["description"])
+
+
+def load_mapping(skeleton: Skeleton, explicit: str | None = None, *, source: str | None = None) -> Mapping:
+    """The mapping for ``skeleton``: the file ``explicit`` (a path, or a shipped name such as
+    ``"smpl"``), else the first shipped file that fits (:func:`mapping_files` order).
+
+    No fit: :class:`InputError` naming ``source``, field ``skeleton``, listing the skeleton's
+    joints and, per file tried, the joints it missed.
+    """
+    paths = mapping_files()
+    if explicit is not None:
+        path = Path(explicit) if Path(explicit).suffix == ".json" else MAPPINGS_DIR / f"{explicit}.json"
+        if not path.is_file():
+            raise InputError(source, "mapping", f"no mapping file {explicit!r} ({path}); shipped: {', '.join(p.stem for p in paths)}")
+        paths = [path]
+    names, tried = set(skeleton.joint_names), []
+    for path in paths:
+        result = _resolve(read_spec(path), path, names)
+        if isinstance(result, Mapping):
+            return result
+        tried.append(f"{path.name} (missing {', '.join(result[:6])}{f' and {len(result) - 6} more' if len(result) > 6 else ''})")
+    raise InputError(source, "skeleton", f"no joint mapping fits this skeleton; it has {len(names)} joints: "
+                     f"{', '.join(skeleton.joint_names)}; tried {'; '.join(tried)}; add a mapping file to "
+                     f"{MAPPINGS_DIR} or pass one explicitly")  # fmt: skip
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+
+
+def _perp(v: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """``v`` without its component along the unit vector ``u``."""
+    return v - np.sum(v * u, -1, keepdims=True) * u
+
+
+def frame_from(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rotations ``(..., 3, 3)``, columns ``e1 = a/|a|``, ``e2`` = ``b`` made orthogonal to ``e1``
+    (any perpendicular if ``b`` is parallel to ``a``), ``e3 = e1 x e2``."""
+    e1, alt = _unit(a), np.where(np.abs(_unit(a)[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    b = _perp(b, e1)
+    e2 = _unit(np.where(np.linalg.norm(b, axis=-1, keepdims=True) < 1e-9, np.cross(e1, alt), b))
+    return np.stack([e1, e2, np.cross(e1, e2)], axis=-1)
+
+
+def body_axes(P: dict[str, np.ndarray], mapping: Mapping, up: np.ndarray | None = None):
+    """``(L, U, F)`` each ``(T, 3)``: left (right hip -> left hip); up (``up``, else pelvis -> the
+    torso's joint, the chest), made orthogonal to L; forward ``L x U``."""
+    L = _unit(P[mapping.body_of_kind("thigh", "left")] - P[mapping.body_of_kind("thigh", "right")])
+    U = _unit(_perp(np.broadcast_to(up, L.shape) if up is not None else P["torso_link"] - P["pelvis"], L))
+    return L, U, np.cross(L, U)
+
+
+def _flexion_side(P: dict, mapping: Mapping, side: str, upper: bool, forward: np.ndarray) -> np.ndarray:
+    """Where an arm segment bends to at the elbow: the upper arm towards the forearm, forearm and
+    hand towards the upper arm, orthogonal to the segment; ``forward`` as the elbow straightens
+    (blended in between 29 and 12 degrees of bend)."""
+    sh, el, wr = (mapping.body_of_kind(k, side) for k in ("upper_arm", "forearm", "hand"))
+    if sh is None or el is None or wr is None:
+        return forward
+    seg, other = (P[el] - P[sh], P[wr] - P[el]) if upper else (P[wr] - P[el], P[sh] - P[el])
+    u = _unit(seg)
+    beta = np.clip((np.linalg.norm(np.cross(u, _unit(other)), axis=-1, keepdims=True) - 0.2) / 0.3, 0.0, 1.0)
+    return _unit(beta * _unit(_perp(other, u)) + (1.0 - beta) * forward)
+
+
+def segment_frames(P: dict[str, np.ndarray], mapping: Mapping, up: np.ndarray | None = None,
+                   calibration: bool = True) -> dict[str, np.ndarray]:  # fmt: skip
+    """Segment frames ``(T, 3, 3)`` from points ``P`` (:func:`human_points` / :func:`g1_points`);
+    ``d`` the body's segment direction, ``L, U, F`` = :func:`body_axes`. Thigh, shank ``(d, L)``;
+    arm segments ``(d, flexion side)``. With ``calibration`` (a standing pose: trunk upright and
+    square, soles level): pelvis, torso ``(L, U)``, foot ``(U, d)``; without (frames from positions
+    alone): pelvis ``(L, d)``, torso ``(shoulder line, d)``, foot ``(d, L)``."""
+    L, U, F = body_axes(P, mapping, up)
+    ls, rs = mapping.body_of_kind("upper_arm", "left"), mapping.body_of_kind("upper_arm", "right")
+    out = {}
+    for b in mapping.body_names:
+        role, d = G1_ROLES[b], P[b + ">"] - P[b]
+        if role.kind in ("pelvis", "torso") and calibration:
+            out[b] = frame_from(L, U)
+        elif role.kind == "pelvis":
+            out[b] = frame_from(L, d)
+        elif role.kind == "torso":
+            out[b] = frame_from(P[ls] - P[rs] if ls and rs else L, d)
+        elif role.kind == "foot" and calibration:
+            out[b] = frame_from(U, d)
+        elif role.kind in ("thigh", "shank", "foot"):
+            out[b] = frame_from(d, L)
+        else:
+            out[b] = frame_from(d, _flexion_side(P, mapping, role.side, role.kind == "upper_arm", F))
+    return out
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The standing pose offsets are calibrated in: joint positions ``(J, 3)``, global rotations
+    ``(J, 3, 3)`` (None without orientations), ``up`` (None: the body's own pelvis -> chest, for a
+    rest pose not placed in the world) and a label."""
+
+    pos: np.ndarray
+    rot: np.ndarray | None
+    up: np.ndarray | None
+    label: str
+
+
+def rest_positions(joint_pos: np.ndarray, joint_rot: np.ndarray, skeleton: Skeleton) -> np.ndarray:
+    """The rest pose ``(J, 3)``: all global rotations identity, bone offsets
+    ``o_j = median_t R_parent(t)^T (p_j(t) - p_parent(t))``, ``p_j = p_parent + o_j``."""
+    rest = np.zeros((len(skeleton.parents), 3))
+    for j, p in enumerate(skeleton.parents):
+        if p >= 0:
+            rest[j] = rest[p] + np.median(np.einsum("tba,tb->ta", joint_rot[:, p], joint_pos[:, j] - joint_pos[:, p]), axis=0)
+    return rest
+
+
+def _cosines(P: dict, mapping: Mapping, kinds: tuple[str, ...], U: np.ndarray) -> np.ndarray:
+    """``(T, 2, len(kinds))`` cosines between ``U`` and the segment directions of both sides."""
+    bodies = [[mapping.body_of_kind(k, s) for k in kinds] for s in SIDES]
+    return np.stack([np.stack([np.sum(_unit(P[b + ">"] - P[b]) * U, -1) for b in row], -1) for row in bodies], 1)
+
+
+def standing_frame(joint_pos: np.ndarray, skeleton: Skeleton, mapping: Mapping) -> int:
+    """The frame most like standing: score ``-sum cos(thighs and shanks, z) + 2 cos(pelvis ->
+    chest, z) - 5 |z_ankle,left - z_ankle,right| / leg length``, maximised."""
+    P = human_points(joint_pos, skeleton, mapping)
+    ankles = [P[mapping.body_of_kind("foot", s)] for s in SIDES]
+    leg = max(float(np.median(np.linalg.norm(P["pelvis"] - ankles[0], axis=-1))), 1e-6)
+    trunk = _unit(P["torso_link"] - P["pelvis"])[:, 2]
+    score = -_cosines(P, mapping, ("thigh", "shank"), Z).sum(axis=(1, 2)) + 2 * trunk - 5 * np.abs(ankles[0][:, 2] - ankles[1][:, 2]) / leg
+    return int(np.argmax(score))
+
+
+def reference_pose(joint_pos: np.ndarray, joint_rot: np.ndarray | None, skeleton: Skeleton, mapping: Mapping) -> Reference:
+    """The rest pose (:func:`rest_positions`) when it stands (thighs and shanks within 37 degrees
+    of its own pelvis -> chest axis reversed, feet within 37 degrees of level: SMPL, OMOMO, PyMO
+    T-poses), else the clip's :func:`standing_frame` with world up (LAFAN1's zero-rotation pose is
+    no standing pose; clips without orientations have no rest pose)."""
+    if joint_rot is not None:
+        rest = rest_positions(joint_pos, joint_rot, skeleton)
+        P = human_points(rest[None], skeleton, mapping)
+        U = body_axes(P, mapping)[1]
+        if (_cosines(P, mapping, ("thigh", "shank"), U) < -0.8).all() and (np.abs(_cosines(P, mapping, ("foot",), U)) < 0.6).all():
+            return Reference(rest, np.broadcast_to(np.eye(3), (len(rest), 3, 3)), None, "rest pose")
+    t = standing_frame(joint_pos, skeleton, mapping)
+    return Reference(joint_pos[t], None if joint_rot is None else joint_rot[t], Z, f"frame {t}")
+
+
+def driver_rotations(joint_pos: np.ndarray, joint_rot: np.ndarray | None, skeleton: Skeleton,
+                     mapping: Mapping) -> dict[str, np.ndarray]:  # fmt: skip
+    """``D_k(t)`` ``(T, 3, 3)`` per body: the driving joint's global rotation, or without
+    orientations the frame from positions (:func:`segment_frames`, ``calibration=False``)."""
+    if joint_rot is not None:
+        return {link.body: joint_rot[:, skeleton.index(link.joint)] for link in mapping.links}
+    return segment_frames(human_points(joint_pos, skeleton, mapping), mapping, None, calibration=False)
+
+
+def rotation_offsets(ref: Reference, skeleton: Skeleton, mapping: Mapping,
+                     sole_up: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:  # fmt: skip
+    """``O_k = D_k(ref)^T G_h,k(ref) G_r,k^T R_r,k`` per body ``(3, 3)`` (module doc).
+
+    ``sole_up[foot]``: the sole's normal in the foot driver's own frame, measured where the foot
+    is planted; it replaces the reference's up in the foot recipe, so a planted human foot gives
+    a level G1 foot whatever the reference's ankle angle."""
+    P = human_points(ref.pos[None], skeleton, mapping)
+    D = driver_rotations(ref.pos[None], None if ref.rot is None else ref.rot[None], skeleton, mapping)
+    Gh = segment_frames(P, mapping, ref.up)
+    for b, u in (sole_up or {}).items():
+        Gh[b] = D[b] @ frame_from(u, D[b][0].T @ (P[b + ">"][0] - P[b][0]))
+    Gr, R = segment_frames(g1_points(mapping), mapping, Z), g1_rest().rot
+    return {b: D[b][0].T @ Gh[b][0] @ Gr[b][0].T @ R[b] for b in mapping.body_names}

@@ -1,0 +1,167 @@
+"""The retarget stage: every human clip of the input -> a G1 :class:`RobotClip`, written as
+``datasets/<NAME>/retargeted/`` (LeRobot) with ``report.json`` and one MCAP log per clip.
+
+Per clip (independent, so a process pool runs them): resample the human clip to the control
+rate (:data:`FPS`), pick its mapping, compute the scale, build :class:`IKTargets`, map the
+objects into the robot's world, solve the IK in a scene built with the same collision model
+as the physics, label per-link contacts from the human's, and measure
+:func:`pipeline.metrics.retarget_metrics`. A finished clip is cached in
+``datasets/<NAME>/.work/retarget/`` (keyed by the source and the clip index), so a re-run resumes
+where it stopped; a failing clip is reported with its one-line error and the others go on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import pickle
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from pipeline.clip import HumanClip, RobotClip
+from pipeline.errors import InputError
+from pipeline.geometry import ObjectPhysics
+from pipeline.scene import SceneObject, build_scene
+
+FPS = 50
+METHOD = "lessmimic-mink"
+
+
+@dataclass(frozen=True)
+class ClipResult:
+    """One clip's outcome: the robot clip and its metrics, or the error that stopped it."""
+
+    index: int
+    source: str
+    robot: RobotClip | None
+    metrics: dict
+    scale: dict
+    error: str | None = None
+
+
+def _link_map(clip: HumanClip, mapping) -> dict[str, str]:
+    from pipeline.metrics import DEFAULT_LINK_MAP
+
+    names = set(clip.skeleton.joint_names)
+    return {**{j: b for j, b in DEFAULT_LINK_MAP.items() if j in names}, **{link.joint: link.body for link in mapping.links}}
+
+
+def retarget_clip(clip: HumanClip, *, height_override: float | None = None, mapping_name: str | None = None) -> tuple[RobotClip, dict, dict]:
+    """(robot clip, metrics, scale summary) for one human clip."""
+    from pipeline.metrics import retarget_metrics
+    from retarget.ik import solve_sequence
+    from retarget.mapping import load_mapping
+    from retarget.scaling import compute_scale, human_to_targets, map_objects
+
+    if clip.frames < 2:
+        raise InputError(clip.source, "frames", f"a clip needs at least 2 frames, got {clip.frames}")
+    t0 = time.perf_counter()
+    human = clip.resampled(FPS)
+    mapping = load_mapping(human.skeleton, mapping_name, source=human.source)
+    info = compute_scale(human, mapping, height_override=height_override)
+    targets = human_to_targets(human, mapping, height_override=height_override, scale=info)
+    objects = map_objects(human, info, targets)
+    scene = build_scene([SceneObject(o.name, o.geometry, ObjectPhysics(mass=o.mass or 2.0), pose=tuple(o.pose[0])) for o in objects])
+    qpos = solve_sequence(targets, scene, {o.name: o.pose for o in objects}, source=human.source)
+    link_map = _link_map(human, mapping)
+    links = tuple(dict.fromkeys(link_map.values()))
+    contacts = np.zeros((human.frames, len(links)), bool)
+    if human.contacts is not None:
+        for j, body in link_map.items():
+            contacts[:, links.index(body)] |= human.contacts[:, human.skeleton.index(j)]
+    robot = RobotClip(
+        qpos, FPS, human.source, objects=objects, contact_links=links, contacts=contacts, method=METHOD, task=human.task,
+        provenance={"source": human.source, "synthetic": human.synthetic, "mapping": mapping.name, "source_fps": clip.fps},
+    )  # fmt: skip
+    seconds = time.perf_counter() - t0
+    return robot, retarget_metrics(robot, human, link_map=link_map, seconds_wall=seconds), info.summary()
+
+
+def _cache_key(clip: HumanClip, index: int) -> str:
+    h = hashlib.sha256()
+    for a in (clip.joint_pos, *(o.pose for o in clip.objects)):
+        h.update(np.ascontiguousarray(a).tobytes())
+    h.update(f"{clip.source}|{index}|{clip.fps}|{METHOD}".encode())
+    return h.hexdigest()[:16]
+
+
+def _run_one(args: tuple[int, HumanClip, Path, float | None]) -> ClipResult:
+    index, clip, work, height_override = args
+    cached = work / f"{_cache_key(clip, index)}.pkl"
+    if cached.is_file():
+        return pickle.loads(cached.read_bytes())
+    try:
+        robot, metrics, scale = retarget_clip(clip, height_override=height_override)
+        result = ClipResult(index, clip.source, robot, metrics, scale)
+    except InputError as exc:  # a bad clip is reported; the others go on
+        return ClipResult(index, clip.source, None, {}, {}, error=str(exc))
+    tmp = cached.with_suffix(".tmp")
+    tmp.write_bytes(pickle.dumps(result))
+    tmp.replace(cached)
+    return result
+
+
+def retarget_clips(clips: list[HumanClip], work: Path, *, jobs: int = 1, height_override: float | None = None) -> list[ClipResult]:
+    """Retarget every clip (in ``jobs`` processes), resuming from the cache in ``work``."""
+    work.mkdir(parents=True, exist_ok=True)
+    tasks = [(i, c, work, height_override) for i, c in enumerate(clips)]
+    bar = tqdm(total=len(tasks), desc="retarget", unit="clip")
+    results: list[ClipResult] = []
+    if jobs <= 1:
+        for t in tasks:
+            results.append(_run_one(t))
+            bar.update()
+    else:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            for r in pool.map(_run_one, tasks):
+                results.append(r)
+                bar.update()
+    bar.close()
+    return sorted(results, key=lambda r: r.index)
+
+
+def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, jobs: int = 1, body_model: str | None = None,
+              height_override: float | None = None) -> dict:  # fmt: skip
+    """``lessmimic retarget``: ingest, retarget every clip, write the dataset, report and logs."""
+    from pipeline.clip_dataset import robot_clips_to_episodes
+    from pipeline.dataset import write_dataset
+    from pipeline.dataset_card import DatasetCard
+    from pipeline.ingest import ingest, stage_dir, write_json_atomic
+    from pipeline.inspect_log import write_robot_log
+    from pipeline.metrics import summarise
+
+    out = stage_dir(name, "retargeted")
+    if out.exists() and not overwrite:
+        raise InputError(out, "dataset", "already exists; pass --overwrite (OVERWRITE=1 with make) to replace it")
+    t0 = time.perf_counter()
+    human = ingest(input_path, name, overwrite=True, body_model=body_model)
+    results = retarget_clips(list(human.clips), out.parent / ".work" / "retarget", jobs=jobs, height_override=height_override)
+    done = [r for r in results if r.robot is not None]
+    failed = [{"episode": r.index, "source": r.source, "error": r.error} for r in results if r.robot is None]
+    for r in failed:
+        print(f"error: {r['error']}")
+    report = {
+        "stage": "retargeted", "method": METHOD, "fps": FPS, "input": input_path or "embedded synthetic default",
+        "clips": [{"source": r.source, "task": r.robot.task, **r.metrics, "scale": r.scale} for r in done],
+        "failed": failed, "summary": summarise([r.metrics for r in done]) if done else {},
+    }  # fmt: skip
+    if done:
+        synthetic = any(r.robot.provenance.get("synthetic") for r in done)
+        features, episodes = robot_clips_to_episodes([r.robot for r in done])
+        card = DatasetCard(
+            title=f"{name}: G1 retargeted motion",
+            description=("SYNTHETIC human-object demonstrations, " if synthetic else "Human(-object) motion capture, ")
+            + "retargeted to the Unitree G1 by interaction-preserving mink IK (kinematic: not yet physically simulated).",
+            provenance=[r.source for r in done], fps=FPS, synthetic=synthetic, stage="retargeted",
+            license="apache-2.0" if synthetic else "other",
+        )  # fmt: skip
+        write_dataset(out, f"lessmimic/{name}-retargeted", FPS, features, episodes, card=card, overwrite=overwrite)
+        write_json_atomic(out / "report.json", {**report, "seconds_wall": time.perf_counter() - t0})
+        logs = out.parent / "logs" / "retargeted"
+        for k, r in enumerate(done):
+            write_robot_log(r.robot, logs / f"{k:03d}_{Path(r.source).stem.replace(':', '_')}.mcap")
+    return report
