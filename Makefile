@@ -14,7 +14,7 @@ JOBS ?= 1
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install retarget physicalize features test test-fast bench clean-venv
+.PHONY: install retarget physicalize features test test-fast bench bench-retarget clean-venv
 
 install: $(VENV)/.installed
 
@@ -44,6 +44,9 @@ test-fast: install
 
 bench: install
 	$(PY) bench/bench_dataset.py
+
+bench-retarget: install
+	$(PY) bench/bench_retarget.py
 
 clean-venv:
 	rm -rf $(VENV)
