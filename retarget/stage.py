@@ -6,14 +6,16 @@ rate (:data:`FPS`), pick its mapping, compute the scale, build :class:`IKTargets
 objects into the robot's world, solve the IK in a scene built with the same collision model
 as the physics, label per-link contacts from the human's, and measure
 :func:`pipeline.metrics.retarget_metrics`. A finished clip is cached in
-``datasets/<NAME>/.work/retarget/`` (keyed by the source and the clip index), so a re-run resumes
-where it stopped; a failing clip is reported with its one-line error and the others go on.
+``datasets/<NAME>/.work/retarget/`` (keyed by the clip's data and index), so a re-run after an
+interruption resumes where it stopped (``--overwrite`` starts afresh; a finished stage removes
+the cache); a failing clip is reported with its one-line error and the others go on.
 """
 
 from __future__ import annotations
 
 import hashlib
 import pickle
+import shutil
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -138,8 +140,11 @@ def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, job
     if out.exists() and not overwrite:
         raise InputError(out, "dataset", "already exists; pass --overwrite (OVERWRITE=1 with make) to replace it")
     t0 = time.perf_counter()
+    work = out.parent / ".work" / "retarget"
+    if overwrite:  # a fresh run; without --overwrite an interrupted run resumes from `work`
+        shutil.rmtree(work, ignore_errors=True)
     human = ingest(input_path, name, overwrite=True, body_model=body_model)
-    results = retarget_clips(list(human.clips), out.parent / ".work" / "retarget", jobs=jobs, height_override=height_override)
+    results = retarget_clips(list(human.clips), work, jobs=jobs, height_override=height_override)
     done = [r for r in results if r.robot is not None]
     failed = [{"episode": r.index, "source": r.source, "error": r.error} for r in results if r.robot is None]
     for r in failed:
@@ -164,4 +169,5 @@ def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, job
         logs = out.parent / "logs" / "retargeted"
         for k, r in enumerate(done):
             write_robot_log(r.robot, logs / f"{k:03d}_{Path(r.source).stem.replace(':', '_')}.mcap")
+        shutil.rmtree(work, ignore_errors=True)  # finished: the resume cache has served its purpose
     return report
