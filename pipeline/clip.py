@@ -31,8 +31,9 @@ def _check_fps(fps: float, source: str) -> float:
     return float(fps)
 
 
-def _check_array(a, shape: tuple, name: str, source: str, frames: int | None = None) -> np.ndarray:
-    """Float64 array of ``shape`` (``None`` = any length), finite, with ``frames`` rows if given."""
+def check_array(a, shape: tuple, name: str, source: str, frames: int | None = None) -> np.ndarray:
+    """Float64 array of ``shape`` (``None`` = any length), finite, with ``frames`` rows if given;
+    otherwise :class:`InputError` naming ``source``, the field ``name`` and the first bad frame."""
     a = np.asarray(a, dtype=np.float64)
     if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape)):
         want = "(" + ", ".join("T" if s is None else str(s) for s in shape) + ")"
@@ -113,7 +114,7 @@ class ObjectTrack:
     source: str = ""
 
     def __post_init__(self):
-        pose = _check_array(self.pose, (None, 7), f"object {self.name} pose", self.source)
+        pose = check_array(self.pose, (None, 7), f"object {self.name} pose", self.source)
         pose[:, 3:] = _normalise_quats(pose[:, 3:], f"object {self.name} quaternion", self.source)
         object.__setattr__(self, "pose", pose)
         if self.contact is not None:
@@ -156,11 +157,11 @@ class HumanClip:
         src = self.source
         object.__setattr__(self, "fps", _check_fps(self.fps, src))
         J = len(self.skeleton.joint_names)
-        pos = _check_array(self.joint_pos, (None, J, 3), "joint_pos", src)
+        pos = check_array(self.joint_pos, (None, J, 3), "joint_pos", src)
         object.__setattr__(self, "joint_pos", pos)
         T = pos.shape[0]
         if self.joint_quat is not None:
-            q = _check_array(self.joint_quat, (T, J, 4), "joint_quat", src, frames=T)
+            q = check_array(self.joint_quat, (T, J, 4), "joint_quat", src, frames=T)
             object.__setattr__(self, "joint_quat", _normalise_quats(q, "joint_quat", src))
         if self.contacts is not None:
             c = np.asarray(self.contacts).astype(bool)
@@ -215,7 +216,7 @@ class RobotClip:
     def __post_init__(self):
         src = self.source
         object.__setattr__(self, "fps", _check_fps(self.fps, src))
-        qpos = _check_array(self.qpos, (None, QPOS_DIM), "qpos", src)
+        qpos = check_array(self.qpos, (None, QPOS_DIM), "qpos", src)
         qpos[:, 3:7] = _normalise_quats(qpos[:, 3:7], "qpos root quaternion", src)
         object.__setattr__(self, "qpos", qpos)
         T = qpos.shape[0]

@@ -121,7 +121,7 @@ class _Evil:
 
 def test_bad_gmr_files(tmp_path):
     p = _pkl(tmp_path, _gmr(dof_pos=np.zeros((5, 23))), "narrow.pkl")
-    expect_input_error(lambda: read_gmr_pkl(p), tmp_path, file=p, field="dof_pos", match=r"\(5, 23\) is not \(T, 29\)")
+    expect_input_error(lambda: read_gmr_pkl(p), tmp_path, file=p, field="dof_pos", match=r"shape \(5, 23\) does not match \(T, 29\)")
     root = np.zeros((5, 3))
     root[4, 2] = np.inf
     q = _pkl(tmp_path, _gmr(root_pos=root), "inf.pkl")

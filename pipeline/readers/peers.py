@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.clip import ObjectTrack, RobotClip
-from pipeline.errors import InputError, first_bad_frame
+from pipeline.clip import ObjectTrack, RobotClip, check_array
+from pipeline.errors import InputError
 from pipeline.geometry import ObjectGeometry
 from pipeline.readers.keypoints import load_npz, load_numpy_pickle
 from pipeline.robot import G1_JOINT_NAMES
@@ -44,17 +44,7 @@ def _array(d, key: str, width: int | None, src: str, frames: int | None = None) 
     """``d[key]`` as float64 ``[T, width]``, finite, with ``frames`` rows when given."""
     if key not in d:
         raise InputError(src, key, f"missing (keys are {', '.join(sorted(d))})")
-    a = np.asarray(d[key], dtype=np.float64)
-    if a.ndim != 2 or (width is not None and a.shape[1] != width):
-        raise InputError(src, key, f"shape {a.shape} is not (T, {width})")
-    if a.shape[0] == 0:
-        raise InputError(src, key, "has zero frames")
-    if frames is not None and a.shape[0] != frames:
-        raise InputError(src, key, f"has {a.shape[0]} frames, expected {frames}")
-    bad = ~np.isfinite(a)
-    if bad.any():
-        raise InputError(src, key, "is NaN or infinite", frame=first_bad_frame(bad))
-    return a
+    return check_array(d[key], (None, width), key, src, frames=frames)
 
 
 def _fps(d, src: str) -> float:
