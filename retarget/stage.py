@@ -1,5 +1,6 @@
 """The retarget stage: every human clip of the input -> a G1 :class:`RobotClip`, written as
-``datasets/<NAME>/retargeted/`` (LeRobot) with ``report.json`` and one MCAP log per clip.
+``datasets/<NAME>/retargeted/`` (LeRobot) with ``report.json``, and per clip an MCAP log and a
+PNG plot (:mod:`retarget.plot`) in ``datasets/<NAME>/logs/retargeted/``.
 
 Per clip (independent, so a process pool runs them): resample the human clip to the control
 rate (:data:`FPS`), pick its mapping, compute the scale, build :class:`IKTargets`, map the
@@ -135,6 +136,7 @@ def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, job
     from pipeline.ingest import ingest, stage_dir, write_json_atomic
     from pipeline.inspect_log import write_robot_log
     from pipeline.metrics import summarise
+    from retarget.plot import plot_clip
 
     out = stage_dir(name, "retargeted")
     if out.exists() and not overwrite:
@@ -167,7 +169,9 @@ def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, job
         write_dataset(out, f"lessmimic/{name}-retargeted", FPS, features, episodes, card=card, overwrite=overwrite)
         write_json_atomic(out / "report.json", {**report, "seconds_wall": time.perf_counter() - t0})
         logs = out.parent / "logs" / "retargeted"
-        for k, r in enumerate(done):
-            write_robot_log(r.robot, logs / f"{k:03d}_{Path(r.source).stem.replace(':', '_')}.mcap")
+        for k, r in enumerate(tqdm(done, desc="logs and plots", unit="clip")):
+            stem = f"{k:03d}_{Path(r.source).stem.replace(':', '_')}"
+            write_robot_log(r.robot, logs / f"{stem}.mcap")
+            plot_clip(r.robot, human.clips[r.index].resampled(FPS), logs / f"{stem}.png")
         shutil.rmtree(work, ignore_errors=True)  # finished: the resume cache has served its purpose
     return report

@@ -42,6 +42,7 @@ def test_default_chain_writes_and_reloads_the_human_dataset(tmp_path, monkeypatc
     robot = LeRobotDataset("lessmimic/default-retargeted", root=tmp_path / "default" / "retargeted")
     assert robot.num_episodes == 4 and robot.fps == 50
     assert len(list((tmp_path / "default" / "logs" / "retargeted").glob("*.mcap"))) == 4
+    assert len(list((tmp_path / "default" / "logs" / "retargeted").glob("*.png"))) == 4
     # A second run refuses to overwrite, with one line, and leaves the dataset intact.
     capsys.readouterr()
     assert main(["retarget"]) == 2
