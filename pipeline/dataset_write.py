@@ -193,17 +193,18 @@ class _DataFiles:
 # --- the writer ----------------------------------------------------------------------------------
 
 
-def _check_target(root: Path, overwrite: bool) -> None:
+def check_target(root: Path, overwrite: bool) -> None:
+    """``root`` may be (re)written: a valid folder name, and absent unless ``overwrite``."""
     validate_name(root.name, "dataset folder name")
     if root.exists() and not overwrite:
-        raise InputError(root, "dataset", "already exists; pass --overwrite (overwrite=True) to replace it")
+        raise InputError(root, "dataset", "already exists; pass --overwrite (OVERWRITE=1 with make, overwrite=True in Python) to replace it")
     if root.exists() and not root.is_dir():
         raise InputError(root, "dataset", "exists and is not a folder")
 
 
 def _commit(staging: Path, root: Path, overwrite: bool) -> None:
     """Move the finished staging folder to ``root`` (replacing an old dataset only if ``overwrite``)."""
-    _check_target(root, overwrite)
+    check_target(root, overwrite)
     old = None
     if root.exists():
         old = root.parent / f".{root.name}.old-{os.getpid()}-{uuid.uuid4().hex[:8]}"
@@ -258,7 +259,7 @@ def write_dataset(
         raise InputError(repo_id, "features", "must be a non-empty list with unique names")
     if card is not None and card.fps is not None and card.fps != fps:
         raise InputError(repo_id, "card fps", f"{card.fps} differs from the dataset fps {fps}")
-    _check_target(root, overwrite)
+    check_target(root, overwrite)
     root.parent.mkdir(parents=True, exist_ok=True)
     _remove_dead_staging(root)
     staging = root.parent / f".{root.name}.staging-{os.getpid()}-{uuid.uuid4().hex[:8]}"

@@ -17,17 +17,10 @@ from pathlib import Path
 from tqdm import tqdm
 
 from pipeline.clip import HumanClip
-from pipeline.errors import InputError
+from pipeline.dataset import dataset_root
+from pipeline.dataset_write import check_target
 
 HUMAN_FPS = 30
-_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-
-
-def check_name(name: str) -> str:
-    """A dataset name is one path component of letters, digits, ``_ . -`` (no separators, no ``..``)."""
-    if not _NAME.fullmatch(name) or ".." in name:
-        raise InputError(name, "name", "dataset name must be letters, digits, '_', '.', '-' with no path separators or '..'")
-    return name
 
 
 def datasets_root() -> Path:
@@ -36,10 +29,11 @@ def datasets_root() -> Path:
 
 
 def stage_dir(name: str, stage: str, root: Path | None = None) -> Path:
-    return (root or datasets_root()) / check_name(name) / stage
+    """``<datasets root>/<name>/<stage>``; ``name`` is checked by :func:`pipeline.dataset.validate_name`."""
+    return dataset_root(root or datasets_root(), name) / stage
 
 
-def _file_stem(source: str) -> str:
+def file_stem(source: str) -> str:
     """A portable file name stem for a clip source (``synthetic:PickUp`` -> ``synthetic_PickUp``)."""
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(source).stem) or "clip"
 
@@ -79,8 +73,7 @@ def ingest(
     from pipeline.inspect_log import write_human_log
 
     out = stage_dir(name, "human", root)
-    if out.exists() and not overwrite:  # before any work, so the user sees only this line
-        raise InputError(out, "dataset", "already exists; pass --overwrite (OVERWRITE=1 with make) to replace it")
+    check_target(out, overwrite)  # before any work, so the user sees only this line
     t0 = time.perf_counter()
     clips = [c.resampled(HUMAN_FPS) for c in tqdm(load_input(input_path, body_model=body_model), desc="read", unit="clip")]
     synthetic = any(c.synthetic for c in clips)
@@ -104,7 +97,7 @@ def ingest(
     reloaded = LeRobotDataset(f"lessmimic/{name}-human", root=out)
     logs = out.parent / "logs" / "human"  # beside the dataset root, so `publish` does not upload them
     for i, c in enumerate(tqdm(clips, desc="inspection logs", unit="clip")):
-        write_human_log(c, logs / f"{i:03d}_{_file_stem(c.source)}.mcap")
+        write_human_log(c, logs / f"{i:03d}_{file_stem(c.source)}.mcap")
     seconds = time.perf_counter() - t0
     report = {
         "stage": "human",

@@ -133,14 +133,14 @@ def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, job
     from pipeline.clip_dataset import robot_clips_to_episodes
     from pipeline.dataset import write_dataset
     from pipeline.dataset_card import DatasetCard
-    from pipeline.ingest import ingest, stage_dir, write_json_atomic
+    from pipeline.dataset_write import check_target
+    from pipeline.ingest import file_stem, ingest, stage_dir, write_json_atomic
     from pipeline.inspect_log import write_robot_log
     from pipeline.metrics import summarise
     from retarget.plot import plot_clip
 
     out = stage_dir(name, "retargeted")
-    if out.exists() and not overwrite:
-        raise InputError(out, "dataset", "already exists; pass --overwrite (OVERWRITE=1 with make) to replace it")
+    check_target(out, overwrite)
     t0 = time.perf_counter()
     work = out.parent / ".work" / "retarget"
     if overwrite:  # a fresh run; without --overwrite an interrupted run resumes from `work`
@@ -170,7 +170,7 @@ def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, job
         write_json_atomic(out / "report.json", {**report, "seconds_wall": time.perf_counter() - t0})
         logs = out.parent / "logs" / "retargeted"
         for k, r in enumerate(tqdm(done, desc="logs and plots", unit="clip")):
-            stem = f"{k:03d}_{Path(r.source).stem.replace(':', '_')}"
+            stem = f"{k:03d}_{file_stem(r.source)}"
             write_robot_log(r.robot, logs / f"{stem}.mcap")
             plot_clip(r.robot, human.clips[r.index].resampled(FPS), logs / f"{stem}.png")
         shutil.rmtree(work, ignore_errors=True)  # finished: the resume cache has served its purpose
