@@ -58,7 +58,8 @@ def retarget_clip(clip: HumanClip, *, height_override: float | None = None, mapp
     from pipeline.metrics import retarget_metrics
     from retarget.ik import solve_sequence
     from retarget.mapping import load_mapping
-    from retarget.scaling import compute_scale, human_to_targets, map_objects
+    from retarget.objects import map_objects
+    from retarget.scaling import compute_scale, human_to_targets
 
     if clip.frames < 2:
         raise InputError(clip.source, "frames", f"a clip needs at least 2 frames, got {clip.frames}")

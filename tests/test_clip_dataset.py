@@ -66,7 +66,7 @@ def _assert_robot_equal(a: RobotClip, b: RobotClip):
 def test_qpos_difference_matches_mujoco():
     """Against MuJoCo on a model with the G1's joint layout (a free joint, then 29 hinges)."""
     mujoco = pytest.importorskip("mujoco")
-    chain = "".join(f'<body><joint type="hinge" axis="0 1 0"/><geom size="0.01"/>' for _ in range(29)) + "</body>" * 29
+    chain = "".join('<body><joint type="hinge" axis="0 1 0"/><geom size="0.01"/>' for _ in range(29)) + "</body>" * 29
     m = mujoco.MjModel.from_xml_string(f'<mujoco><worldbody><body><freejoint/><geom size="0.1"/>{chain}</body></worldbody></mujoco>')
     assert (m.nq, m.nv) == (36, 35)
     q = _qpos(12, 3)

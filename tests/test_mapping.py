@@ -20,10 +20,8 @@ from pipeline.default_input import default_clips
 from pipeline.errors import InputError
 from pipeline.robot import g1_xml_path
 from pipeline.rotations import rotation_from_wxyz, wxyz_from_rotation
-from retarget.mapping import (
-    CORE_BODIES, G1_ROLES, MAPPINGS_DIR, body_axes, g1_rest, human_points, load_mapping, mapping_files, read_spec,
-    rest_positions,
-)  # fmt: skip
+from retarget.frames import body_axes, rest_positions
+from retarget.mapping import CORE_BODIES, G1_ROLES, MAPPINGS_DIR, g1_rest, human_points, load_mapping, mapping_files, read_spec
 from retarget.scaling import compute_scale, human_to_targets
 from mocap_paths import SHARED_MOCAP, needs_shared
 

@@ -18,8 +18,10 @@ from pipeline.errors import InputError
 from pipeline.robot import g1_xml_path
 from pipeline.rotations import rotation_from_wxyz, wxyz_from_rotation
 from pipeline.synthetic.skeleton import FOREARM, SHANK, THIGH, UPPER_ARM
-from retarget.mapping import g1_rest, load_mapping, standing_frame
-from retarget.scaling import compute_scale, human_to_targets, map_objects, object_bottom
+from retarget.frames import standing_frame
+from retarget.mapping import g1_rest, load_mapping
+from retarget.objects import map_objects, object_bottom
+from retarget.scaling import compute_scale, human_to_targets
 from test_mapping import CLIPS, clip_named
 
 SYNTH = {c.task: c for c in default_clips()}
