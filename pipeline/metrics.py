@@ -57,7 +57,6 @@ box takes ~40-60 ms. (The first G1 compile in a process costs ~3 s: MuJoCo's mes
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -69,7 +68,7 @@ from pipeline.clip import HumanClip, ObjectTrack, RobotClip
 from pipeline.foot_contact import SIDES, detect_foot_contacts
 from pipeline.geometry import MeshGeometry
 from pipeline.robot import G1_JOINT_NAMES
-from pipeline.scene import Scene, SceneObject, build_scene
+from pipeline.scene import Scene, SceneObject, build_scene, link_collision_geoms
 
 METRIC_KEYS: tuple[str, ...] = (
     "ground_penetration_frac_1cm", "ground_penetration_max_m", "object_penetration_frac_1cm",
@@ -113,22 +112,6 @@ def _scene(objects: tuple[tuple[str, object], ...]) -> Scene:
 
 def scene_for(objects: tuple[ObjectTrack, ...]) -> Scene:
     return _scene(tuple((o.name, o.geometry) for o in objects))
-
-
-def _collision_geoms(m: mujoco.MjModel, body: str) -> list[int]:
-    """Collision geoms of ``body``, else of its nearest descendants that have some."""
-    try:
-        queue = deque([m.body(body).id])
-    except KeyError:
-        raise ValueError(f"{body!r} is not a G1 body") from None
-    while queue:
-        level = list(queue)
-        queue.clear()
-        geoms = [g for g in range(m.ngeom) if m.geom_contype[g] and m.geom_bodyid[g] in level]
-        if geoms:
-            return geoms
-        queue.extend(b for b in range(m.nbody) if m.body_parentid[b] in level and b not in level)
-    raise ValueError(f"G1 body {body!r} has no collision geoms below it")
 
 
 def _subtree(m: mujoco.MjModel, roots: tuple[str, ...], stop: str = "waist_yaw_link") -> set[int]:
@@ -236,7 +219,7 @@ def _sweep(robot: RobotClip, refs: tuple[np.ndarray, list[str]] | None, need_sup
     lower = _subtree(m, _LOWER_BODY_ROOTS)
     lower_geoms = [g for g in rg if m.geom_bodyid[g] in lower]
     flags, links = refs if refs is not None else (np.zeros((T, 0), bool), [])
-    link_geoms = [_collision_geoms(m, b) for b in links]
+    link_geoms = [link_collision_geoms(m, b) for b in links]
     site_ids = [m.site(s).id for s in FOOT_SITES]
     adr = [(sc.object_qpos_adr[o.name], o.pose) for o in robot.objects]
     out = _Sweep(m, rg, np.empty((T, len(rg), 3)), np.empty((T, len(rg), 9)), np.empty((T, 2, 3)), np.zeros(T),

@@ -211,3 +211,19 @@ def build_scene(objects: tuple[SceneObject, ...] | list[SceneObject] = (), profi
         if not o.fixed:
             scene.object_qpos_adr[o.name] = int(model.jnt_qposadr[model.joint(f"{o.name}_free").id])
     return scene
+
+
+def link_collision_geoms(model: mujoco.MjModel, body: str) -> list[int]:
+    """Collision geoms (``contype`` != 0) of ``body``, else of its nearest descendants that have
+    some (the G1's ``*_hip_pitch_link`` has none: the hip capsule of ``*_hip_roll_link`` stands
+    in; ``*_shoulder_pitch_link``: the upper-arm capsule)."""
+    try:
+        level = [model.body(body).id]
+    except KeyError:
+        raise ValueError(f"{body!r} is not a body of the model") from None
+    while level:
+        geoms = [g for g in range(model.ngeom) if model.geom_contype[g] and model.geom_bodyid[g] in level]
+        if geoms:
+            return geoms
+        level = [b for b in range(model.nbody) if model.body_parentid[b] in level and b not in level]
+    raise ValueError(f"body {body!r} has no collision geoms below it")

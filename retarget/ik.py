@@ -27,6 +27,10 @@ high-cost frame task (replacing its target) to ``(x0, y0, h_sole)`` with zero ro
 heading ``yaw0``, where ``(x0, y0, yaw0)`` are the foot target's at contact onset and ``h_sole``
 is derived from the foot collision capsules (:func:`~retarget.ik_config.sole_offset`).
 
+Objects: while ``IKTargets.object_contact`` flags a link (the human touches an object with a
+joint mapped to it), a :class:`~retarget.contact.ContactTask` drives the link's distance to the
+objects to ``IKConfig.contact_gap``, faded in and out over ``contact_ramp_s``.
+
 Start-up: frame 0 starts from the default joint pose with the root at the target pelvis
 position and heading (lifted until no geom is below the floor), and runs up to
 ``init_iterations`` QP steps with no speed limit.
@@ -45,6 +49,7 @@ from mink.limits.limit import Constraint
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.robot import default_qpos
 from pipeline.scene import Scene
+from retarget.contact import ContactTask, contact_ramp
 from retarget.ik_config import (
     FOOT_BODIES,
     FloorLimit,
@@ -116,6 +121,7 @@ class G1Retargeter:
         self.config_limit = mink.ConfigurationLimit(m, gain=cfg.configuration_limit_gain)
         self.velocity_limit = FrameVelocityLimit(m, joint_velocity_limits(cfg.velocity_limit_factor), dt=1.0 / 30.0)
         self._robot_geoms = robot_collision_geoms(m)
+        self._object_geoms = object_collision_geoms(m, scene)
         self.collision_limits = self._collision_limits()
         self._mocap = {o.name: int(m.body_mocapid[m.body(o.name).id]) for o in scene.objects if not o.fixed}
         self.stats: dict[str, float] = {}
@@ -132,6 +138,7 @@ class G1Retargeter:
         T, cfg = targets.frames, self.config
         objects_pose = self._check_inputs(targets, objects_pose or {}, source)
         tasks = self._body_tasks(targets)
+        contact_task, contact_w = self._contact_task(targets)
         contact = targets.foot_contact if (targets.foot_contact is not None and cfg.pin_feet) else np.zeros((T, 2), bool)
         feet_idx = [targets.body_names.index(b) if b in targets.body_names else None for b in FOOT_BODIES]
         self.velocity_limit.dt = 1.0 / targets.fps
@@ -151,6 +158,9 @@ class G1Retargeter:
             else:
                 self.configuration.update()
             active = self._frame_tasks(targets, t, tasks, poses[t], contact[t], pins, feet_idx)
+            if contact_task is not None and contact_w[t].any():
+                contact_task.set_weights(contact_w[t])
+                active.append(contact_task)
             if t == 0:
                 limits = [self.config_limit, *self.collision_limits]
                 solves += self._solve_frame(active, limits, cfg.init_iterations, cfg.init_tolerance)
@@ -191,6 +201,16 @@ class G1Retargeter:
         active.append(self.posture)
         return active
 
+    def _contact_task(self, targets: IKTargets) -> tuple[ContactTask | None, np.ndarray | None]:
+        """The object-contact task and its ``(T, L)`` weights (None when nothing is flagged or no object has geoms)."""
+        flags = targets.object_contact
+        if flags is None or not flags.any() or not self._object_geoms:
+            return None, None
+        cfg = self.config
+        task = ContactTask(self.model, targets.contact_links, self._object_geoms, cost=cfg.contact_cost, gap=cfg.contact_gap,
+                           reach=cfg.contact_reach)  # fmt: skip
+        return task, contact_ramp(flags, int(round(cfg.contact_ramp_s * targets.fps)))
+
     def _collision_limits(self) -> list[FloorLimit | SeparationLimit]:
         """Robot vs floor (closed form for spheres/capsules), robot vs objects, robot vs robot."""
         m, cfg, robot = self.model, self.config, self._robot_geoms
@@ -204,7 +224,7 @@ class G1Retargeter:
         others = [g for g in robot if g not in round_]
         if others:
             limits.append(SeparationLimit(m, [(others, [floor])], minimum_distance_from_collisions=cfg.floor_min_distance, **kw))
-        objects = object_collision_geoms(m, self.scene)
+        objects = self._object_geoms
         if objects:
             limits.append(SeparationLimit(m, [(robot, objects)], minimum_distance_from_collisions=cfg.object_min_distance, **kw))
         if cfg.self_collision:

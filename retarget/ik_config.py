@@ -67,6 +67,11 @@ class IKConfig:
     the floor and level, costs ``foot_pin_position_cost`` / ``foot_pin_orientation_cost``;
     ``pin_anchor`` picks the onset xy and heading: the foot target's (``"target"``) or the
     robot foot's (``"robot"``).
+
+    Object contacts: while ``IKTargets.object_contact`` flags a link, a
+    :class:`~retarget.contact.ContactTask` (cost ``contact_cost``, faded in and out over
+    ``contact_ramp_s``) drives its distance to the objects to ``contact_gap`` (links farther than
+    ``contact_reach`` are left alone).
     """
 
     solver: str = "daqp"
@@ -89,6 +94,10 @@ class IKConfig:
     foot_pin_position_cost: float = 30.0
     foot_pin_orientation_cost: float = 10.0
     pin_anchor: str = "target"
+    contact_cost: float = 5.0
+    contact_gap: float = 0.01
+    contact_reach: float = 0.3
+    contact_ramp_s: float = 0.1
 
     def __post_init__(self):
         if self.iterations < 1 or self.init_iterations < 1:
@@ -101,6 +110,8 @@ class IKConfig:
             raise ValueError("IKConfig: detection_distance must exceed every minimum distance")
         if self.pin_anchor not in ("target", "robot"):
             raise ValueError(f"IKConfig: pin_anchor must be 'target' or 'robot', got {self.pin_anchor!r}")
+        if not self.object_min_distance <= self.contact_gap < self.contact_reach:
+            raise ValueError("IKConfig: need object_min_distance <= contact_gap < contact_reach")
         if self.damping < 0 or self.posture_cost < 0:
             raise ValueError("IKConfig: damping and posture_cost must be >= 0")
 

@@ -19,7 +19,7 @@ import pickle
 import shutil
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +56,7 @@ def _link_map(clip: HumanClip, mapping) -> dict[str, str]:
 def retarget_clip(clip: HumanClip, *, height_override: float | None = None, mapping_name: str | None = None) -> tuple[RobotClip, dict, dict]:
     """(robot clip, metrics, scale summary) for one human clip."""
     from pipeline.metrics import retarget_metrics
+    from retarget.contact import link_contact_flags
     from retarget.ik import solve_sequence
     from retarget.mapping import load_mapping
     from retarget.objects import map_objects
@@ -69,14 +70,11 @@ def retarget_clip(clip: HumanClip, *, height_override: float | None = None, mapp
     info = compute_scale(human, mapping, height_override=height_override)
     targets = human_to_targets(human, mapping, height_override=height_override, scale=info)
     objects = map_objects(human, info, targets)
+    link_map = _link_map(human, mapping)
+    links, contacts = link_contact_flags(human, link_map)
+    targets = replace(targets, contact_links=links, object_contact=contacts if objects else None)
     scene = build_scene([SceneObject(o.name, o.geometry, ObjectPhysics(mass=o.mass or 2.0), pose=tuple(o.pose[0])) for o in objects])
     qpos = solve_sequence(targets, scene, {o.name: o.pose for o in objects}, source=human.source)
-    link_map = _link_map(human, mapping)
-    links = tuple(dict.fromkeys(link_map.values()))
-    contacts = np.zeros((human.frames, len(links)), bool)
-    if human.contacts is not None:
-        for j, body in link_map.items():
-            contacts[:, links.index(body)] |= human.contacts[:, human.skeleton.index(j)]
     robot = RobotClip(
         qpos, FPS, human.source, objects=objects, contact_links=links, contacts=contacts, method=METHOD, task=human.task,
         provenance={"source": human.source, "synthetic": human.synthetic, "mapping": mapping.name, "source_fps": clip.fps},

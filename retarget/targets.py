@@ -20,7 +20,9 @@ class IKTargets:
     ``pos`` (T,K,3) world positions; ``quat`` (T,K,4) world orientations wxyz (rows of a body
     whose ``rot_weight`` is 0 are ignored); ``pos_weight`` / ``rot_weight`` (K,) task costs;
     ``foot_contact`` (T,2) bool for (left, right): the human foot is on the ground, so the
-    robot foot must be pinned flat; ``scale`` the human-to-robot length ratio used.
+    robot foot must be pinned flat; ``scale`` the human-to-robot length ratio used;
+    ``object_contact`` (T,L) bool over the robot links ``contact_links``: the human touches an
+    object with a joint mapped to that link, so the link must be brought to the object surface.
     """
 
     body_names: tuple[str, ...]
@@ -31,6 +33,8 @@ class IKTargets:
     fps: float
     scale: float
     foot_contact: np.ndarray | None = None
+    contact_links: tuple[str, ...] = ()
+    object_contact: np.ndarray | None = None
 
     def __post_init__(self):
         T, K = self.pos.shape[:2]
@@ -40,6 +44,8 @@ class IKTargets:
             raise ValueError("IKTargets: pos_weight and rot_weight must have one entry per body")
         if self.foot_contact is not None and self.foot_contact.shape != (T, 2):
             raise ValueError(f"IKTargets: foot_contact shape {self.foot_contact.shape} != ({T}, 2)")
+        if self.object_contact is not None and self.object_contact.shape != (T, len(self.contact_links)):
+            raise ValueError(f"IKTargets: object_contact shape {self.object_contact.shape} != ({T}, {len(self.contact_links)})")
 
     @property
     def frames(self) -> int:
