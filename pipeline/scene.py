@@ -213,17 +213,25 @@ def build_scene(objects: tuple[SceneObject, ...] | list[SceneObject] = (), profi
     return scene
 
 
+#: Contact surfaces that span more than one body: the G1 sits on its hip capsules (their bottom
+#: is 3.6 cm below the pelvis sphere's, which cannot reach a seat), so a contact of the pelvis
+#: means the pelvis sphere or either hip capsule.
+CONTACT_SURFACE_EXTRA = {"pelvis": ("left_hip_collision", "right_hip_collision")}
+
+
 def link_collision_geoms(model: mujoco.MjModel, body: str) -> list[int]:
-    """Collision geoms (``contype`` != 0) of ``body``, else of its nearest descendants that have
-    some (the G1's ``*_hip_pitch_link`` has none: the hip capsule of ``*_hip_roll_link`` stands
-    in; ``*_shoulder_pitch_link``: the upper-arm capsule)."""
+    """Collision geoms (``contype`` != 0) making ``body``'s contact surface: its own (plus
+    :data:`CONTACT_SURFACE_EXTRA`), else those of its nearest descendants that have some (the
+    G1's ``*_hip_pitch_link`` has none: the hip capsule of ``*_hip_roll_link`` stands in;
+    ``*_shoulder_pitch_link``: the upper-arm capsule)."""
     try:
         level = [model.body(body).id]
     except KeyError:
         raise ValueError(f"{body!r} is not a body of the model") from None
+    extra = [model.geom(g).id for g in CONTACT_SURFACE_EXTRA.get(body, ()) if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) >= 0]
     while level:
         geoms = [g for g in range(model.ngeom) if model.geom_contype[g] and model.geom_bodyid[g] in level]
         if geoms:
-            return geoms
+            return geoms + extra
         level = [b for b in range(model.nbody) if model.body_parentid[b] in level and b not in level]
     raise ValueError(f"body {body!r} has no collision geoms below it")

@@ -115,3 +115,61 @@ class ContactTask(mink.Task):
 
     def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
         return self._evaluate(configuration)[1]
+
+
+class FootClearance:
+    r"""Moving objects give way to planted feet.
+
+    A pinned foot cannot step aside (it is pinned), and a mocap object is not optimised, so an
+    object set down onto a planted robot foot (the robot's feet are longer, relative to its
+    scaled body, than the human's) would leave an unresolvable penetration: the collision limit
+    could only push the foot into the floor. Instead, each object carries a held horizontal offset
+    ``o``; at every frame, for every planted foot within ``margin`` of the object
+    (``phi = min d(g, o)`` over the foot's and the object's collision geoms),
+
+    ``o <- o + min(margin - phi, step) u``,   ``u`` = horizontal unit vector from the foot
+    origin to the object's nearest point,
+
+    so the object is moved away at most ``step`` per frame (no jumps) and keeps the offset
+    afterwards (a resting object does not slide back). Objects far from both feet (bounding
+    spheres apart by more than ``margin``) cost one distance check.
+    """
+
+    def __init__(self, model: mujoco.MjModel, feet: tuple[str, ...], objects: dict[str, int], *, margin: float, step: float):
+        if margin <= 0 or step <= 0:
+            raise ValueError(f"FootClearance: margin and step must be > 0, got {margin}, {step}")
+        self.model, self.margin, self.step = model, margin, step
+        self.feet = [(model.body(f).id, link_collision_geoms(model, f)) for f in feet]
+        self.objects = {name: (model.body(name).id, mocap, link_collision_geoms(model, name)) for name, mocap in objects.items()}
+        self.offset = {name: np.zeros(3) for name in objects}
+        self._fromto = np.empty(6)
+
+    def _radius(self, body: int, geoms: list[int], data: mujoco.MjData) -> float:
+        return max((np.linalg.norm(data.geom_xpos[g] - data.xpos[body]) + self.model.geom_rbound[g] for g in geoms), default=0.0)
+
+    def update(self, data: mujoco.MjData, planted: np.ndarray) -> bool:
+        """Grow the offsets for this frame's planted feet (``data``: kinematics at the frame's
+        warm start, mocap already offset). True when an offset changed (re-apply and re-run
+        the kinematics)."""
+        m, changed = self.model, False
+        for s, (foot, foot_geoms) in enumerate(self.feet):
+            if not planted[s]:
+                continue
+            r_foot = self._radius(foot, foot_geoms, data)
+            for name, (body, _, geoms) in self.objects.items():
+                if np.linalg.norm(data.xpos[body] - data.xpos[foot]) > r_foot + self._radius(body, geoms, data) + self.margin:
+                    continue
+                best, point = self.margin, None
+                for g in foot_geoms:
+                    for o in geoms:
+                        dist = mujoco.mj_geomDistance(m, data, g, o, self.margin, self._fromto)
+                        if dist < best:
+                            best, point = dist, self._fromto[3:].copy()
+                if point is None:
+                    continue
+                u = (point - data.xpos[foot])[:2]
+                if np.linalg.norm(u) < 1e-6:
+                    u = (data.xpos[body] - data.xpos[foot])[:2]
+                self.offset[name][:2] += min(self.margin - best, self.step) * u / max(np.linalg.norm(u), 1e-9)
+                changed = True
+        return changed

@@ -49,7 +49,7 @@ from mink.limits.limit import Constraint
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.robot import default_qpos
 from pipeline.scene import Scene
-from retarget.contact import ContactTask, contact_ramp
+from retarget.contact import ContactTask, FootClearance, contact_ramp
 from retarget.ik_config import (
     FOOT_BODIES,
     FloorLimit,
@@ -140,6 +140,9 @@ class G1Retargeter:
         tasks = self._body_tasks(targets)
         contact_task, contact_w = self._contact_task(targets)
         contact = targets.foot_contact if (targets.foot_contact is not None and cfg.pin_feet) else np.zeros((T, 2), bool)
+        moving = {name: self._mocap[name] for name in objects_pose if name in self._mocap}
+        clearance = FootClearance(self.model, FOOT_BODIES, moving, margin=cfg.clearance_margin, step=cfg.clearance_speed / targets.fps) if moving else None
+        self._objects_in, self.objects_pose = objects_pose, {name: pose.copy() for name, pose in objects_pose.items()}
         feet_idx = [targets.body_names.index(b) if b in targets.body_names else None for b in FOOT_BODIES]
         self.velocity_limit.dt = 1.0 / targets.fps
         pins: list[np.ndarray | None] = [None, None]
@@ -150,13 +153,14 @@ class G1Retargeter:
         solves, t0 = 0, time.perf_counter()
         self._relaxed_steps = self._failed_steps = 0
         for t in range(T):
-            for name, pose in objects_pose.items():
-                self.configuration.data.mocap_pos[self._mocap[name]] = pose[t, :3]
-                self.configuration.data.mocap_quat[self._mocap[name]] = pose[t, 3:]
+            self._place_objects(t, clearance)
             if t == 0:
                 self.configuration.update(self._initial_qpos(targets))
             else:
                 self.configuration.update()
+                if clearance is not None and contact[t].any() and clearance.update(self.configuration.data, contact[t]):
+                    self._place_objects(t, clearance)
+                    self.configuration.update()
             active = self._frame_tasks(targets, t, tasks, poses[t], contact[t], pins, feet_idx)
             if contact_task is not None and contact_w[t].any():
                 contact_task.set_weights(contact_w[t])
@@ -178,6 +182,16 @@ class G1Retargeter:
         return out
 
     # --- internals ----------------------------------------------------------------------------------
+
+    def _place_objects(self, t: int, clearance: FootClearance | None) -> None:
+        """Move the mocap objects to frame ``t``'s pose (plus the clearance offset) and record it in ``objects_pose``."""
+        for name, pose in self.objects_pose.items():
+            if name not in self._mocap:
+                continue
+            if clearance is not None:
+                pose[t, :3] = self._objects_in[name][t, :3] + clearance.offset[name]
+            self.configuration.data.mocap_pos[self._mocap[name]] = pose[t, :3]
+            self.configuration.data.mocap_quat[self._mocap[name]] = pose[t, 3:]
 
     def _frame_tasks(self, targets: IKTargets, t: int, tasks: list, poses: np.ndarray, contact: np.ndarray,
                      pins: list, feet_idx: list) -> list:  # fmt: skip

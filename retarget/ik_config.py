@@ -71,7 +71,9 @@ class IKConfig:
     Object contacts: while ``IKTargets.object_contact`` flags a link, a
     :class:`~retarget.contact.ContactTask` (cost ``contact_cost``, faded in and out over
     ``contact_ramp_s``) drives its distance to the objects to ``contact_gap`` (links farther than
-    ``contact_reach`` are left alone).
+    ``contact_reach`` are left alone). A moving object within ``clearance_margin`` of a planted
+    foot is moved away horizontally at up to ``clearance_speed`` [m/s] and stays moved
+    (:class:`~retarget.contact.FootClearance`); ``G1Retargeter.objects_pose`` holds the result.
     """
 
     solver: str = "daqp"
@@ -98,6 +100,8 @@ class IKConfig:
     contact_gap: float = 0.01
     contact_reach: float = 0.3
     contact_ramp_s: float = 0.1
+    clearance_margin: float = 0.02
+    clearance_speed: float = 1.0
 
     def __post_init__(self):
         if self.iterations < 1 or self.init_iterations < 1:
@@ -112,6 +116,8 @@ class IKConfig:
             raise ValueError(f"IKConfig: pin_anchor must be 'target' or 'robot', got {self.pin_anchor!r}")
         if not self.object_min_distance <= self.contact_gap < self.contact_reach:
             raise ValueError("IKConfig: need object_min_distance <= contact_gap < contact_reach")
+        if self.clearance_margin <= 0 or self.clearance_speed <= 0:
+            raise ValueError("IKConfig: clearance_margin and clearance_speed must be > 0")
         if self.damping < 0 or self.posture_cost < 0:
             raise ValueError("IKConfig: damping and posture_cost must be >= 0")
 

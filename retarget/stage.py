@@ -57,7 +57,7 @@ def retarget_clip(clip: HumanClip, *, height_override: float | None = None, mapp
     """(robot clip, metrics, scale summary) for one human clip."""
     from pipeline.metrics import retarget_metrics
     from retarget.contact import link_contact_flags
-    from retarget.ik import solve_sequence
+    from retarget.ik import G1Retargeter
     from retarget.mapping import load_mapping
     from retarget.objects import map_objects
     from retarget.scaling import compute_scale, human_to_targets
@@ -74,7 +74,9 @@ def retarget_clip(clip: HumanClip, *, height_override: float | None = None, mapp
     links, contacts = link_contact_flags(human, link_map)
     targets = replace(targets, contact_links=links, object_contact=contacts if objects else None)
     scene = build_scene([SceneObject(o.name, o.geometry, ObjectPhysics(mass=o.mass or 2.0), pose=tuple(o.pose[0])) for o in objects])
-    qpos = solve_sequence(targets, scene, {o.name: o.pose for o in objects}, source=human.source)
+    ik = G1Retargeter(scene)
+    qpos = ik.retarget(targets, {o.name: o.pose for o in objects}, source=human.source)
+    objects = tuple(replace(o, pose=ik.objects_pose[o.name]) for o in objects)  # moved clear of planted feet
     robot = RobotClip(
         qpos, FPS, human.source, objects=objects, contact_links=links, contacts=contacts, method=METHOD, task=human.task,
         provenance={"source": human.source, "synthetic": human.synthetic, "mapping": mapping.name, "source_fps": clip.fps},

@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 
 from pipeline.errors import InputError
-from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES, joint_limits
-from pipeline.scene import build_scene
+from pipeline.geometry import Primitive
+from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES, default_qpos, joint_limits
+from pipeline.scene import SceneObject, build_scene
 from retarget.ik import FrameVelocityLimit, G1Retargeter, SeparationLimit, solve_sequence, targets_from_qpos
 from retarget.ik_config import FloorLimit, IKConfig, ik_model, joint_velocity_limits, pairs_kept_apart_by_joint_limits, sole_offset
 from retarget.targets import IKTargets
@@ -335,3 +336,32 @@ def test_pairs_kept_apart_by_joint_limits_are_the_ankle_ones(plain):
     mujoco.mj_kinematics(m, d)
     assert 0.0 < mujoco.mj_geomDistance(m, d, brace, foot, 1.0, None) < 0.01
     assert len(SeparationLimit(m, [(list(plain.robot_geom_ids), list(plain.robot_geom_ids))], skip_kept_apart=True).geom_id_pairs) == len(lim.geom_id_pairs) - 28
+
+
+def test_box_set_down_onto_a_planted_toe_gives_way(plain):
+    """A box lowered onto the right toe: the pinned foot stays, the box is moved clear and stays there."""
+    T = 60
+    q_true = np.repeat(default_qpos(plain.profile)[None], T, axis=0)
+    contact = np.ones((T, 2), bool)
+    targets = targets_from_qpos(plain.model, q_true, G1_LINK_NAMES, FPS, foot_contact=contact)
+    d = mujoco.MjData(plain.model)
+    d.qpos[:36] = q_true[0]
+    mujoco.mj_kinematics(plain.model, d)
+    toe = d.site_xpos[plain.model.site("right_foot").id] + [0.12, 0.0, 0.0]  # in front of the sole centre, over the toe
+    box = np.zeros((T, 7))
+    box[:, 3] = 1.0
+    box[:, :2] = toe[:2] + [0.05, 0.0]  # the box's back face 3 cm behind the toe tip
+    box[:, 2] = 0.08 + np.clip(np.linspace(0.25, -0.05, T), 0.0, None)  # comes down, then rests on the floor
+    scene = build_scene([SceneObject("box", Primitive("box", (0.08, 0.08, 0.08)), pose=tuple(box[0]))])
+    assert contacts(scene, q_true, {"box": box})["object"] < -0.02  # left where it is, the box would cut into the toe
+    ik = G1Retargeter(scene, IKConfig())
+    q = ik.retarget(targets, {"box": box})
+    moved = ik.objects_pose["box"]
+    assert contacts(scene, q, {"box": moved})["object"] > -0.002
+    xy, _, _ = _feet(plain.model, q)
+    assert np.linalg.norm(xy - xy[0], axis=-1).max() < 0.002  # the feet stay pinned
+    shift = moved[:, :2] - box[:, :2]
+    assert shift[-1, 0] > 0.02 and abs(shift[-1, 1]) < 0.01  # pushed forward, away from the foot
+    np.testing.assert_allclose(shift[-5:], np.repeat(shift[-1:], 5, axis=0))  # and settles once it rests
+    assert np.linalg.norm(np.diff(shift, axis=0), axis=-1).max() <= 1.0 / FPS + 1e-9  # at most clearance_speed
+    np.testing.assert_array_equal(moved[:, 2:], box[:, 2:])  # heights and orientations untouched

@@ -35,13 +35,24 @@ def test_omomo_box_clip_meets_the_quality_bars():
     assert 0.5 < scale["scale_leg"] < 0.9
 
 
+@needs_shared
+@pytest.mark.slow
+def test_intermimic_table_clip_meets_the_quality_bars():
+    from pipeline.readers import read_clips
+
+    clip = read_clips(SHARED_MOCAP / "intermimic" / "sub2_largetable_000.pt")[0]
+    robot, metrics, _ = retarget_clip(clip)
+    assert robot.objects and _meets_bars(metrics) == []
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "task",
     [
         "PickUp",
         "Push",
-        pytest.param("SitStand", marks=pytest.mark.xfail(strict=True, reason="contact preservation 0.85 < 0.9: pelvis-on-seat contact, open")),
+        "SitStand",
+        "Carry",
     ],
 )
 def test_default_clips_meet_the_quality_bars(task):

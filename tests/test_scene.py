@@ -150,3 +150,15 @@ def test_omomo_box_mesh_collides_through_its_hull():
     world = rotation_from_wxyz(d.qpos[a + 3 : a + 7]).apply(mesh.convex_hull.vertices) + d.qpos[a : a + 3]
     assert world[:, 2].min() == pytest.approx(0.0, abs=3e-3)
     assert s.model.body_mass[s.object_body_id["box"]] == pytest.approx(4.0)
+
+
+def test_link_contact_surfaces():
+    from pipeline.scene import link_collision_geoms
+
+    m = build_scene().model
+    names = lambda body: sorted(m.geom(g).name for g in link_collision_geoms(m, body))  # noqa: E731
+    assert names("pelvis") == ["left_hip_collision", "pelvis_collision", "right_hip_collision"]  # the G1 sits on its hips
+    assert names("left_hip_pitch_link") == ["left_hip_collision"]  # no geoms of its own: the child's capsule
+    assert len(names("left_ankle_roll_link")) == 7
+    with pytest.raises(ValueError, match="'nose' is not a body"):
+        link_collision_geoms(m, "nose")
