@@ -148,8 +148,10 @@ def _objects_back(ep: Episode, source: str) -> tuple[ObjectTrack, ...]:
     return tuple(out)
 
 
-def _source_frames(T: int, start) -> np.ndarray:
-    return np.arange(T, dtype=np.int64) + int(start or 0)
+def _source_frames(T: int, start, ratio: float = 1.0) -> np.ndarray:
+    """Source frame of each of ``T`` frames, ``start + round(t ratio)`` (``ratio``: source fps / clip fps,
+    for a clip resampled from its source)."""
+    return int(start or 0) + np.round(np.arange(T) * ratio).astype(np.int64)
 
 
 _SOURCE_FRAME = Feature("source_frame", "int64", ("source_frame",), "frame index in the source motion")
@@ -177,7 +179,8 @@ def robot_clips_to_episodes(clips: Sequence[RobotClip], *, default_task: str = D
             data["contact"] = np.zeros((c.frames, len(links)), bool) if c.contacts is None else c.contacts
         obj_data, obj_meta = _object_data(c, with_contact)
         data.update(obj_data)
-        data["source_frame"] = _source_frames(c.frames, c.provenance.get("source_frame_start"))
+        ratio = float(c.provenance.get("source_fps", fps)) / fps
+        data["source_frame"] = _source_frames(c.frames, c.provenance.get("source_frame_start"), ratio)
         meta = {"kind": "robot", "source": c.source, "fps": c.fps, "method": c.method, "clip_task": c.task,
                 "synthetic": bool(c.provenance.get("synthetic", False)), "provenance": c.provenance,
                 "contact_links": list(c.contact_links), "has_contacts": c.contacts is not None, "objects": obj_meta}  # fmt: skip

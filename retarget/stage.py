@@ -128,6 +128,25 @@ def retarget_clips(clips: list[HumanClip], work: Path, *, jobs: int = 1, height_
     return sorted(results, key=lambda r: r.index)
 
 
+CARD_NOTES = [
+    "`observation.state` is the G1 `qpos` (36): root position, root quaternion wxyz, 29 joint angles in mjlab's joint order "
+    "(names in `meta/info.json`); `observation.qvel` (35) its finite differences.",
+    "`contact` labels, per robot link, the frames where the human touches an object (a human joint within 2 cm of the "
+    "object surface) with a joint mapped to that link; the retargeting brings the link to the object surface on those frames.",
+    "`object.<name>.pose` is each object's pose (position, quaternion wxyz) in the robot's world: real size, placement "
+    "following the scaled interaction, moved clear of the robot's planted feet where needed.",
+    "`source_frame` is the index of the nearest frame of the source take (at the take's own frame rate).",
+    "Per-clip quality figures (penetration, floating, foot sliding, contact preservation, joint limits and speed) are in "
+    "`report.json` next to the dataset; kinematic only: physical validity is measured by the physicalize stage.",
+]
+
+
+def _feature_frames(features) -> dict[str, str]:
+    frames = {"observation.state": "world, z-up (root); joint space", "observation.qvel": "world (root linear), root body (angular)",
+              "contact": "per link", "source_frame": "source take"}  # fmt: skip
+    return {f.name: frames.get(f.name, "world, z-up" if f.name.endswith(".pose") else "") for f in features}
+
+
 def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, jobs: int = 1, body_model: str | None = None,
               height_override: float | None = None) -> dict:  # fmt: skip
     """``lessmimic retarget``: ingest, retarget every clip, write the dataset, report and logs."""
@@ -165,7 +184,7 @@ def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, job
             description=("SYNTHETIC human-object demonstrations, " if synthetic else "Human(-object) motion capture, ")
             + "retargeted to the Unitree G1 by interaction-preserving mink IK (kinematic: not yet physically simulated).",
             provenance=[r.source for r in done], fps=FPS, synthetic=synthetic, stage="retargeted",
-            license="apache-2.0" if synthetic else "other",
+            license="apache-2.0" if synthetic else "other", feature_frames=_feature_frames(features), notes=CARD_NOTES,
         )  # fmt: skip
         write_dataset(out, f"lessmimic/{name}-retargeted", FPS, features, episodes, card=card, overwrite=overwrite)
         write_json_atomic(out / "report.json", {**report, "seconds_wall": time.perf_counter() - t0})

@@ -41,6 +41,11 @@ def test_default_chain_writes_and_reloads_the_human_dataset(tmp_path, monkeypatc
     assert len(list((tmp_path / "default" / "logs" / "human").glob("*.mcap"))) == 4
     robot = LeRobotDataset("lessmimic/default-retargeted", root=tmp_path / "default" / "retargeted")
     assert robot.num_episodes == 4 and robot.fps == 50
+    card = (tmp_path / "default" / "retargeted" / "README.md").read_text()
+    for feature in ("observation.state", "observation.qvel", "contact", "source_frame"):
+        assert f"| `{feature}` |" in card
+    assert "| world, z-up |" in card and "`source_frame` is the index" in card  # object pose row; notes
+    assert robot[0]["source_frame"].item() == 0 and robot[robot.num_frames - 1]["source_frame"].item() > 0
     assert len(list((tmp_path / "default" / "logs" / "retargeted").glob("*.mcap"))) == 4
     assert len(list((tmp_path / "default" / "logs" / "retargeted").glob("*.png"))) == 4
     # A second run refuses to overwrite, with one line, and leaves the dataset intact.

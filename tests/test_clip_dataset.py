@@ -94,6 +94,15 @@ def test_qvel_constant_body_rate():
     assert qvel_from_qpos(q[:1], fps).shape == (1, 35) and not qvel_from_qpos(q[:1], fps).any()
 
 
+def test_source_frame_of_a_resampled_clip():
+    from dataclasses import replace
+
+    clip = _robot_clip(10, 1)
+    resampled = replace(clip, provenance={**clip.provenance, "source_fps": 30.0})  # retargeted at 50 fps from a 30 fps take
+    _, (ep,) = robot_clips_to_episodes([resampled])
+    np.testing.assert_array_equal(ep.data["source_frame"], 7 + np.array([0, 1, 1, 2, 2, 3, 4, 4, 5, 5]))
+
+
 def test_robot_round_trip_through_lerobot(tmp_path):
     clips = [_robot_clip(9, 1), _robot_clip(6, 2, contacts=False, box_contact=False, task=""), _robot_clip(1, 3)]
     features, episodes = robot_clips_to_episodes(clips)
