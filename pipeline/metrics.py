@@ -68,7 +68,7 @@ from pipeline.clip import HumanClip, ObjectTrack, RobotClip
 from pipeline.foot_contact import SIDES, detect_foot_contacts
 from pipeline.geometry import MeshGeometry
 from pipeline.robot import G1_JOINT_NAMES
-from pipeline.scene import Scene, SceneObject, build_scene, link_collision_geoms
+from pipeline.scene import Scene, SceneObject, build_scene, link_collision_geoms, nearest_geom_pair
 
 METRIC_KEYS: tuple[str, ...] = (
     "ground_penetration_frac_1cm", "ground_penetration_max_m", "object_penetration_frac_1cm",
@@ -140,15 +140,6 @@ def lowest_points(xpos: np.ndarray, xmat: np.ndarray, gtype: np.ndarray, size: n
         np.broadcast_to(rbound, rz.shape[:-1]),
     )  # fmt: skip
     return xpos[..., 2] - drop
-
-
-def _min_distance(m, d, geoms_a: list[int], geoms_b: list[int], distmax: float) -> float:
-    """Smallest signed distance between two geom sets (``distmax`` when all are farther)."""
-    best = distmax
-    for a in geoms_a:
-        for b in geoms_b:
-            best = min(best, mujoco.mj_geomDistance(m, d, a, b, distmax, None))
-    return best
 
 
 def _nearest_rows(n_target: int, fps_target: float, n_src: int, fps_src: float) -> np.ndarray:
@@ -233,8 +224,8 @@ def _sweep(robot: RobotClip, refs: tuple[np.ndarray, list[str]] | None, need_sup
         out.xpos[t], out.xmat[t], out.sites[t] = d.geom_xpos[rg], d.geom_xmat[rg], d.site_xpos[site_ids]
         out.obj_depth[t], out.self_depth[t] = _depths(d, kind)
         if need_support and og:
-            out.supported[t] = _min_distance(m, d, lower_geoms, og, 2 * FLOAT_TOL) <= FLOAT_TOL
-        out.preserved[t] = all(bool(og) and _min_distance(m, d, link_geoms[k], og, 2 * CONTACT_TOL) <= CONTACT_TOL
+            out.supported[t] = nearest_geom_pair(m, d, lower_geoms, og, 2 * FLOAT_TOL)[0] <= FLOAT_TOL
+        out.preserved[t] = all(bool(og) and nearest_geom_pair(m, d, link_geoms[k], og, 2 * CONTACT_TOL)[0] <= CONTACT_TOL
                                for k in np.flatnonzero(flags[t]))  # fmt: skip
     return out
 

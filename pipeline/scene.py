@@ -235,3 +235,20 @@ def link_collision_geoms(model: mujoco.MjModel, body: str) -> list[int]:
             return geoms + extra
         level = [b for b in range(model.nbody) if model.body_parentid[b] in level and b not in level]
     raise ValueError(f"body {body!r} has no collision geoms below it")
+
+
+def nearest_geom_pair(model: mujoco.MjModel, data: mujoco.MjData, geoms_a: list[int], geoms_b: list[int], distmax: float,
+                      fromto: np.ndarray | None = None) -> tuple[float, int, int]:  # fmt: skip
+    """``(d, a, b)``: the smallest signed distance (``mj_geomDistance``, < 0 when penetrating) between
+    the geom sets and the pair that has it; ``(distmax, -1, -1)`` when every pair is farther.
+    ``fromto`` (6,), when given, receives that pair's nearest points (on ``a``, then on ``b``)."""
+    best, pair = distmax, (-1, -1)
+    points = None if fromto is None else np.empty(6)
+    for a in geoms_a:
+        for b in geoms_b:
+            dist = mujoco.mj_geomDistance(model, data, a, b, distmax, points)
+            if dist < best:
+                best, pair = dist, (a, b)
+                if fromto is not None:
+                    fromto[:] = points
+    return best, *pair

@@ -17,7 +17,7 @@ import numpy as np
 from mink.limits.collision_avoidance_limit import compute_contact_normal_jacobian
 
 from pipeline.clip import HumanClip
-from pipeline.scene import link_collision_geoms
+from pipeline.scene import link_collision_geoms, nearest_geom_pair
 
 
 def link_contact_flags(clip: HumanClip, link_map: dict[str, str]) -> tuple[tuple[str, ...], np.ndarray]:
@@ -71,7 +71,7 @@ class ContactTask(mink.Task):
         self.link_geoms = [link_collision_geoms(model, b) for b in links]
         self.object_geoms = list(object_geoms)
         self.weights = np.zeros(len(links))
-        self._fromto, self._best = np.empty(6), np.empty(6)
+        self._fromto = np.empty(6)
         self._normal = np.empty(3)
         self._jac1, self._jac2 = np.empty((3, model.nv)), np.empty((3, model.nv))
         self._cache: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]] | None = None
@@ -94,16 +94,10 @@ class ContactTask(mink.Task):
         for k, geoms in enumerate(self.link_geoms):
             if self.weights[k] <= 0.0:
                 continue
-            best, pair = self.reach, None
-            for g in geoms:
-                for o in self.object_geoms:
-                    dist = mujoco.mj_geomDistance(m, d, g, o, self.reach, self._fromto)
-                    if dist < best:
-                        best, pair = dist, (g, o)
-                        self._best[:] = self._fromto
-            if pair is None:
+            best, g, o = nearest_geom_pair(m, d, geoms, self.object_geoms, self.reach, self._fromto)
+            if g < 0:
                 continue
-            row = compute_contact_normal_jacobian(m, d, pair[0], pair[1], self._best, self._normal, self._jac1, self._jac2)
+            row = compute_contact_normal_jacobian(m, d, g, o, self._fromto, self._normal, self._jac1, self._jac2)
             phi[k], J[k] = best, (row if best >= 0 else -row)
         self._cache = (configuration.q.copy(), (phi, J))
         return phi, J
@@ -135,39 +129,37 @@ class FootClearance:
     spheres apart by more than ``margin``) cost one distance check.
     """
 
-    def __init__(self, model: mujoco.MjModel, feet: tuple[str, ...], objects: dict[str, int], *, margin: float, step: float):
+    def __init__(self, model: mujoco.MjModel, feet: tuple[str, ...], objects: tuple[str, ...], *, margin: float, step: float):
         if margin <= 0 or step <= 0:
             raise ValueError(f"FootClearance: margin and step must be > 0, got {margin}, {step}")
         self.model, self.margin, self.step = model, margin, step
-        self.feet = [(model.body(f).id, link_collision_geoms(model, f)) for f in feet]
-        self.objects = {name: (model.body(name).id, mocap, link_collision_geoms(model, name)) for name, mocap in objects.items()}
+        self.feet = [self._rigid(f) for f in feet]
+        self.objects = {name: self._rigid(name) for name in objects}
         self.offset = {name: np.zeros(3) for name in objects}
         self._fromto = np.empty(6)
 
-    def _radius(self, body: int, geoms: list[int], data: mujoco.MjData) -> float:
-        return max((np.linalg.norm(data.geom_xpos[g] - data.xpos[body]) + self.model.geom_rbound[g] for g in geoms), default=0.0)
+    def _rigid(self, body: str) -> tuple[int, list[int], float]:
+        """``(body id, collision geoms, bounding radius about the body origin)`` of a body with geoms of its own."""
+        bid, geoms = self.model.body(body).id, link_collision_geoms(self.model, body)
+        if any(self.model.geom_bodyid[g] != bid for g in geoms):
+            raise ValueError(f"FootClearance: {body!r} needs collision geoms of its own")
+        return bid, geoms, max(float(np.linalg.norm(self.model.geom_pos[g]) + self.model.geom_rbound[g]) for g in geoms)
 
     def update(self, data: mujoco.MjData, planted: np.ndarray) -> bool:
         """Grow the offsets for this frame's planted feet (``data``: kinematics at the frame's
         warm start, mocap already offset). True when an offset changed (re-apply and re-run
         the kinematics)."""
         m, changed = self.model, False
-        for s, (foot, foot_geoms) in enumerate(self.feet):
+        for s, (foot, foot_geoms, r_foot) in enumerate(self.feet):
             if not planted[s]:
                 continue
-            r_foot = self._radius(foot, foot_geoms, data)
-            for name, (body, _, geoms) in self.objects.items():
-                if np.linalg.norm(data.xpos[body] - data.xpos[foot]) > r_foot + self._radius(body, geoms, data) + self.margin:
+            for name, (body, geoms, r_body) in self.objects.items():
+                if np.linalg.norm(data.xpos[body] - data.xpos[foot]) > r_foot + r_body + self.margin:
                     continue
-                best, point = self.margin, None
-                for g in foot_geoms:
-                    for o in geoms:
-                        dist = mujoco.mj_geomDistance(m, data, g, o, self.margin, self._fromto)
-                        if dist < best:
-                            best, point = dist, self._fromto[3:].copy()
-                if point is None:
+                best, g, _ = nearest_geom_pair(m, data, foot_geoms, geoms, self.margin, self._fromto)
+                if g < 0:
                     continue
-                u = (point - data.xpos[foot])[:2]
+                u = (self._fromto[3:] - data.xpos[foot])[:2]
                 if np.linalg.norm(u) < 1e-6:
                     u = (data.xpos[body] - data.xpos[foot])[:2]
                 self.offset[name][:2] += min(self.margin - best, self.step) * u / max(np.linalg.norm(u), 1e-9)

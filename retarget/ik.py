@@ -140,8 +140,8 @@ class G1Retargeter:
         tasks = self._body_tasks(targets)
         contact_task, contact_w = self._contact_task(targets)
         contact = targets.foot_contact if (targets.foot_contact is not None and cfg.pin_feet) else np.zeros((T, 2), bool)
-        moving = {name: self._mocap[name] for name in objects_pose if name in self._mocap}
-        clearance = FootClearance(self.model, FOOT_BODIES, moving, margin=cfg.clearance_margin, step=cfg.clearance_speed / targets.fps) if moving else None
+        clearance = (FootClearance(self.model, FOOT_BODIES, tuple(objects_pose), margin=cfg.clearance_margin,
+                                   step=cfg.clearance_speed / targets.fps) if objects_pose else None)  # fmt: skip
         self._objects_in, self.objects_pose = objects_pose, {name: pose.copy() for name, pose in objects_pose.items()}
         feet_idx = [targets.body_names.index(b) if b in targets.body_names else None for b in FOOT_BODIES]
         self.velocity_limit.dt = 1.0 / targets.fps
@@ -185,9 +185,7 @@ class G1Retargeter:
 
     def _place_objects(self, t: int, clearance: FootClearance | None) -> None:
         """Move the mocap objects to frame ``t``'s pose (plus the clearance offset) and record it in ``objects_pose``."""
-        for name, pose in self.objects_pose.items():
-            if name not in self._mocap:
-                continue
+        for name, pose in self.objects_pose.items():  # every name is a free (mocap) object: _check_inputs
             if clearance is not None:
                 pose[t, :3] = self._objects_in[name][t, :3] + clearance.offset[name]
             self.configuration.data.mocap_pos[self._mocap[name]] = pose[t, :3]
