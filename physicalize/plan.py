@@ -1,0 +1,111 @@
+"""Layer 1 of the teacher: a dynamically feasible centre-of-mass plan for the reference's contact
+schedule, by ZMP preview control (Kajita et al., ICRA 2003).
+
+The ZMP reference at each frame is the kinematic CoM's ground projection clipped into the
+support polygon of the stance feet (the convex hull of their sole corners, shrunk by
+:data:`MARGIN`): where the human's balance was already feasible the plan keeps it, in single
+support the ZMP is pulled onto the stance foot. The cart-table model
+
+    x_{k+1} = A x_k + B u_k,   x = (c, c_dot, c_ddot) per horizontal axis,  u = jerk,
+    p_k = C x_k = c - (z_c / g) c_ddot
+
+is driven by the optimal preview law ``u_k = -G_i sum_j (p_j - p*_j) - G_x x_k - sum_{j=1..N} G_d[j] p*_{k+j}``
+(gains from the discrete Riccati equation of the error-augmented system, ``N`` = 1.6 s of preview),
+so the planned CoM's ZMP follows the reference inside the support region. The height ``z_c`` is the
+mean kinematic CoM height; the CoM's vertical motion is kept from the reference.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+from scipy.linalg import solve_discrete_are
+from scipy.spatial import ConvexHull
+
+from physicalize.reference import Reference
+
+GRAVITY = 9.81
+MARGIN = 0.015
+PREVIEW_S = 1.6
+
+
+@lru_cache(maxsize=16)
+def preview_gains(dt: float, zc: float, n: int, qe: float = 1.0, r: float = 1e-6) -> tuple[float, np.ndarray, np.ndarray]:
+    """``(G_i, G_x (3,), G_d (n,))`` of the preview controller for sample time ``dt`` and height ``zc``."""
+    A = np.array([[1.0, dt, dt * dt / 2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    B = np.array([[dt**3 / 6], [dt * dt / 2], [dt]])
+    C = np.array([[1.0, 0.0, -zc / GRAVITY]])
+    A1 = np.block([[np.eye(1), C @ A], [np.zeros((3, 1)), A]])
+    B1 = np.vstack([C @ B, B])
+    Q = np.zeros((4, 4))
+    Q[0, 0] = qe
+    P = solve_discrete_are(A1, B1, Q, np.array([[r]]))
+    S = np.linalg.inv(r + B1.T @ P @ B1)
+    K = S @ B1.T @ P @ A1
+    Ac = A1 - B1 @ K
+    I1 = np.array([[1.0], [0.0], [0.0], [0.0]])
+    X = -Ac.T @ P @ I1
+    gd = np.zeros(n)
+    gd[0] = -K[0, 0]
+    for j in range(1, n):
+        gd[j] = (S @ B1.T @ X).item()
+        X = Ac.T @ X
+    return float(K[0, 0]), K[0, 1:].copy(), gd
+
+
+def support_polygon(ref: Reference, t: int) -> np.ndarray:
+    """(k, 2) vertices (counter-clockwise) of the stance feet's support polygon at frame ``t``."""
+    pts = np.concatenate([ref.corners[t, k, :, :2] for k in range(2) if ref.stance[t, k]])
+    hull = ConvexHull(pts)
+    return pts[hull.vertices]
+
+
+def clip_to_polygon(p: np.ndarray, poly: np.ndarray, margin: float = MARGIN) -> np.ndarray:
+    """The point of the polygon shrunk by ``margin`` nearest to ``p`` (``p`` itself when inside)."""
+    centre = poly.mean(axis=0)
+    shrunk = centre + (poly - centre) * np.clip(1.0 - margin / np.maximum(np.linalg.norm(poly - centre, axis=1), 1e-9), 0.0, 1.0)[:, None]
+    edges = np.roll(shrunk, -1, axis=0) - shrunk
+    cross = edges[:, 0] * (p[1] - shrunk[:, 1]) - edges[:, 1] * (p[0] - shrunk[:, 0])
+    if np.all(cross >= 0):
+        return p.copy()
+    best, best_d = centre, np.inf
+    for a, e in zip(shrunk, edges):
+        s = np.clip(np.dot(p - a, e) / max(np.dot(e, e), 1e-12), 0.0, 1.0)
+        q = a + s * e
+        dist = np.linalg.norm(p - q)
+        if dist < best_d:
+            best, best_d = q, dist
+    return best
+
+
+def zmp_reference(ref: Reference) -> np.ndarray:
+    """(T, 2) ZMP reference: the kinematic CoM projection clipped into each frame's support polygon."""
+    return np.array([clip_to_polygon(ref.com[t, :2], support_polygon(ref, t)) for t in range(ref.frames)])
+
+
+def plan_com(ref: Reference) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(com_plan (T, 3), zmp_ref (T, 2), zmp_plan (T, 2)): the preview-controlled CoM, starting at
+    the reference's first CoM and CoM velocity."""
+    dt = 1.0 / ref.fps
+    zc = float(np.mean(ref.com[:, 2] - np.min(ref.corners[..., 2], axis=(1, 2))))
+    n = int(round(PREVIEW_S / dt))
+    gi, gx, gd = preview_gains(dt, zc, n)
+    pref = zmp_reference(ref)
+    T = ref.frames
+    padded = np.concatenate([pref, np.repeat(pref[-1:], n, axis=0)])
+    A = np.array([[1.0, dt, dt * dt / 2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    B = np.array([dt**3 / 6, dt * dt / 2, dt])
+    x = np.zeros((3, 2))
+    x[0] = ref.com[0, :2]
+    if T > 2:
+        x[1] = (ref.com[1, :2] - ref.com[0, :2]) / dt
+    err = np.zeros(2)
+    com, zmp = np.zeros((T, 2)), np.zeros((T, 2))
+    for k in range(T):
+        p = x[0] - zc / GRAVITY * x[2]
+        com[k], zmp[k] = x[0], p
+        err += p - pref[k]
+        u = -gi * err - gx @ x - gd @ padded[k + 1 : k + 1 + n]
+        x = A @ x + np.outer(B, u)
+    return np.column_stack([com, ref.com[:, 2]]), pref, zmp

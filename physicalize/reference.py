@@ -1,0 +1,104 @@
+"""The tracking reference: a retargeted motion (``qpos`` at the control rate) turned into the
+per-step quantities the whole-body controller tracks, by forward kinematics of the same model.
+
+* ``qvel``/``qacc`` by central differences (root angular velocity in the pelvis frame, as MuJoCo);
+* centre of mass ``com`` (the planner may replace it with a dynamically feasible one);
+* foot support schedule: a foot is in stance where its sole is within :data:`STANCE_HEIGHT` of
+  the floor and moves slower than :data:`STANCE_SPEED` (the retargeter's pinned feet); on frames
+  where no foot is, every foot that low supports (heel-strike/toe-off: double support), else the
+  lower foot; runs shorter than 3 frames (60 ms) are merged into their neighbours;
+* feet, hands and torso poses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from pipeline.clip_dataset import qvel_from_qpos
+from pipeline.foot_contact import keep_runs
+from physicalize.wbc import FOOT_BODIES, HAND_BODIES, Target, sole_corners
+
+STANCE_HEIGHT = 0.03
+STANCE_SPEED = 0.1
+MIN_RUN = 3
+
+
+@dataclass
+class Reference:
+    """Per-frame tracking quantities (T frames at ``fps``)."""
+
+    fps: float
+    qpos: np.ndarray  # (T, 36)
+    qvel: np.ndarray  # (T, 35)
+    qacc: np.ndarray  # (T, 35)
+    com: np.ndarray  # (T, 3)
+    stance: np.ndarray  # (T, 2) bool
+    foot_pos: np.ndarray  # (T, 2, 3)
+    foot_quat: np.ndarray  # (T, 2, 4)
+    sole_height: np.ndarray  # (T, 2) lowest sole corner above the floor
+    corners: np.ndarray  # (T, 2, 4, 3) sole corners (world)
+    hand_pos: np.ndarray  # (T, 2, 3)
+    torso_quat: np.ndarray  # (T, 4)
+    com_plan: np.ndarray | None = None  # (T, 3) feasible CoM (physicalize.plan), else the kinematic one
+
+    @property
+    def frames(self) -> int:
+        return self.qpos.shape[0]
+
+    def target(self, t: int) -> Target:
+        """The controller's target at frame ``t`` (clamped to the clip)."""
+        t = min(max(t, 0), self.frames - 1)
+        com = self.com if self.com_plan is None else self.com_plan
+        dt = 1.0 / self.fps
+        cv = np.gradient(com, dt, axis=0) if self.frames > 1 else np.zeros_like(com)
+        ca = np.gradient(cv, dt, axis=0) if self.frames > 1 else np.zeros_like(com)
+        fv = np.gradient(self.foot_pos, dt, axis=0)[t] if self.frames > 1 else np.zeros((2, 3))
+        return Target(
+            qpos=self.qpos[t], qvel=self.qvel[t], qacc=self.qacc[t], com=com[t], com_vel=cv[t], com_acc=ca[t],
+            stance=(bool(self.stance[t, 0]), bool(self.stance[t, 1])), foot_pos=self.foot_pos[t],
+            foot_quat=self.foot_quat[t], foot_vel=fv, hand_pos=self.hand_pos[t], torso_quat=self.torso_quat[t],
+        )  # fmt: skip
+
+
+def build_reference(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> Reference:
+    """Forward kinematics of ``qpos`` (T, 36) on ``model`` (its robot part) at ``fps``."""
+    qpos = np.asarray(qpos, dtype=np.float64)
+    T = qpos.shape[0]
+    d = mujoco.MjData(model)
+    feet = [model.body(b).id for b in FOOT_BODIES]
+    hands = [model.body(b).id for b in HAND_BODIES]
+    torso, pelvis = model.body("torso_link").id, model.body("pelvis").id
+    corners = [sole_corners(model, b) for b in FOOT_BODIES]
+    com = np.zeros((T, 3))
+    foot_pos, foot_quat = np.zeros((T, 2, 3)), np.zeros((T, 2, 4))
+    sole = np.zeros((T, 2, 4, 3))
+    hand_pos, torso_quat = np.zeros((T, 2, 3)), np.zeros((T, 4))
+    for t in range(T):
+        d.qpos[:36] = qpos[t]
+        mujoco.mj_kinematics(model, d)
+        mujoco.mj_comPos(model, d)
+        com[t] = d.subtree_com[pelvis]
+        for k in range(2):
+            foot_pos[t, k] = d.xpos[feet[k]]
+            mujoco.mju_mat2Quat(foot_quat[t, k], d.xmat[feet[k]])
+            sole[t, k] = d.xpos[feet[k]] + corners[k] @ d.xmat[feet[k]].reshape(3, 3).T
+            hand_pos[t, k] = d.xpos[hands[k]]
+        mujoco.mju_mat2Quat(torso_quat[t], d.xmat[torso])
+    qvel = qvel_from_qpos(qpos, fps) if T > 1 else np.zeros((1, 35))
+    qacc = np.gradient(qvel, 1.0 / fps, axis=0) if T > 2 else np.zeros_like(qvel)
+    height = sole[..., 2].min(axis=2)
+    speed = np.zeros((T, 2))
+    if T > 1:
+        speed = np.linalg.norm(np.gradient(sole.mean(axis=2)[..., :2], 1.0 / fps, axis=0), axis=-1)
+    low = height < STANCE_HEIGHT
+    stance = low & (speed < STANCE_SPEED)
+    gap = ~stance.any(axis=1)  # between one foot's lift-off and the other's landing: every low foot supports
+    stance[gap] = low[gap]
+    for k in range(2):
+        stance[:, k] = keep_runs(keep_runs(stance[:, k], MIN_RUN, False), MIN_RUN, True)
+    none = ~stance.any(axis=1)  # never plan a flight phase: the lower foot supports
+    stance[none, np.argmin(height[none], axis=1)] = True
+    return Reference(fps, qpos, qvel, qacc, com, stance, foot_pos, foot_quat, height, sole, hand_pos, torso_quat)

@@ -1,0 +1,310 @@
+"""A training-free whole-body QP controller for the G1 in MuJoCo (the teacher's base tracker).
+
+Every control step (50 Hz) it solves one quadratic program over the robot's generalized
+accelerations ``qdd`` (35: free root + 29 joints) and the 3-D contact forces ``f`` at the four
+sole corners of each stance foot::
+
+    min   sum_i w_i || J_i qdd + Jdot_i qd - a_i* ||^2  +  w_q ||qdd||^2  +  w_f ||f||^2
+    s.t.  M_u qdd + h_u = J_{c,u}^T f + tau_ext,u              (floating base, 6 rows: no root actuation)
+          J_foot qdd + Jdot_foot qd = a_foot*                   (stance feet, 6 rows each)
+          |f_x|, |f_y| <= mu f_z,  f_z >= 0                    (linearised friction cones per corner)
+          -tau_max <= M_a qdd + h_a - J_{c,a}^T f - tau_ext,a <= tau_max
+
+``M`` and ``h = qfrc_bias - qfrc_passive`` come from the simulation's own model (so the held
+object's inertia is not in ``M``, but its measured contact forces on the robot are in
+``tau_ext``: the object is a free body moved only by contact). Tasks ``a_i*`` are PD laws with
+feed-forward: centre of mass, pelvis and torso orientation, swing-foot poses, hand positions and a
+posture from the reference. Stance feet hold still with a damping term and are turned back flat
+(``a_foot* = -k_v v - k_p [0; roll/pitch error]``), which keeps a foot from rolling onto its edge.
+
+The joint torques ``tau = M_a qdd + h_a - J_{c,a}^T f - tau_ext,a`` become PD position targets held
+for the control period ``T`` (4 physics steps): ``q* = q_m + (tau + k_d qd_m) / k_p`` at the
+predicted mid-hold state ``q_m = q + qd T/2 + qdd T^2/8``, ``qd_m = qd + qdd T/2``; targets are not
+clipped to the joint range (the actuators clip torque, the joints have their limits).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+from qpsolvers import solve_qp
+
+from pipeline.robot import NUM_JOINTS, ActuatorProfile
+
+NV_ROBOT = 6 + NUM_JOINTS
+FOOT_BODIES = ("left_ankle_roll_link", "right_ankle_roll_link")
+HAND_BODIES = ("left_wrist_yaw_link", "right_wrist_yaw_link")
+CONTROL_DT = 0.02
+
+
+@dataclass(frozen=True)
+class WBCConfig:
+    """Gains (stiffness ``kp`` [1/s^2], damping ``kd`` [1/s]) and task weights of the QP."""
+
+    mu: float = 0.5
+    com_kp: tuple[float, float, float] = (60.0, 60.0, 100.0)
+    com_kd: tuple[float, float, float] = (15.0, 15.0, 20.0)
+    orient_kp: float = 200.0
+    orient_kd: float = 28.0
+    foot_kp: float = 400.0
+    foot_kd: float = 40.0
+    hand_kp: float = 100.0
+    hand_kd: float = 20.0
+    posture_kp: float = 100.0
+    posture_kd: float = 20.0
+    stance_kv: float = 20.0
+    stance_flat_kp: float = 100.0
+    w_com: float = 1000.0
+    w_pelvis: float = 20.0
+    w_torso: float = 10.0
+    w_swing: float = 100.0
+    w_hand: float = 5.0
+    w_posture: float = 1.0
+    w_qdd: float = 1e-4
+    w_force: float = 1e-5
+
+
+@dataclass
+class Target:
+    """What the controller tracks at one control step (world frame; quaternions wxyz)."""
+
+    qpos: np.ndarray  # (36,) reference configuration (posture, orientations)
+    qvel: np.ndarray  # (35,)
+    qacc: np.ndarray  # (35,)
+    com: np.ndarray  # (3,) planned centre of mass
+    com_vel: np.ndarray
+    com_acc: np.ndarray
+    stance: tuple[bool, bool]  # left, right foot in support
+    foot_pos: np.ndarray  # (2, 3) foot body origins
+    foot_quat: np.ndarray  # (2, 4)
+    foot_vel: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
+    hand_pos: np.ndarray | None = None  # (2, 3), None: hands follow the posture only
+    torso_quat: np.ndarray | None = None  # (4,), None: the pelvis orientation
+
+
+@dataclass
+class Solution:
+    """One control step's QP result."""
+
+    qdd: np.ndarray
+    forces: np.ndarray  # (n_corners, 3) world frame
+    tau: np.ndarray  # (29,)
+    action: np.ndarray  # (29,) joint position targets
+    ok: bool
+
+
+def sole_corners(model: mujoco.MjModel, body: str) -> np.ndarray:
+    """(4, 3) support-polygon corners of a foot in its body frame: the extreme capsule end points
+    of its collision capsules (heel-inner, heel-outer, toe-inner, toe-outer order by x then y) at
+    the sole's lowest point."""
+    bid = model.body(body).id
+    pts, bottom = [], []
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] != bid or not model.geom_contype[g] or model.geom_type[g] != mujoco.mjtGeom.mjGEOM_CAPSULE:
+            continue
+        R = np.empty(9)
+        mujoco.mju_quat2Mat(R, model.geom_quat[g])
+        axis = R.reshape(3, 3)[:, 2] * model.geom_size[g, 1]
+        for s in (-1.0, 1.0):
+            pts.append(model.geom_pos[g] + s * axis)
+        bottom.append(model.geom_pos[g][2] - model.geom_size[g, 0])
+    if not pts:
+        raise ValueError(f"foot body {body!r} has no collision capsules")
+    p = np.array(pts)
+    x0, x1 = p[:, 0].min(), p[:, 0].max()
+    heel, toe = p[np.abs(p[:, 0] - x0) < 0.02], p[np.abs(p[:, 0] - x1) < 0.02]
+    z = min(bottom)
+    return np.array([[x0, heel[:, 1].min(), z], [x0, heel[:, 1].max(), z], [x1, toe[:, 1].min(), z], [x1, toe[:, 1].max(), z]])
+
+
+def orientation_error(R_ref: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """World-frame rotation vector ``log(R_ref R^T)`` taking ``R`` to ``R_ref``."""
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, (R_ref @ R.T).ravel())
+    v = np.empty(3)
+    mujoco.mju_quat2Vel(v, q, 1.0)
+    return v
+
+
+def _quat_mat(q: np.ndarray) -> np.ndarray:
+    R = np.empty(9)
+    mujoco.mju_quat2Mat(R, q)
+    return R.reshape(3, 3)
+
+
+class WholeBodyController:
+    """The QP above on a compiled scene (the robot must be the model's first tree: dofs 0..34)."""
+
+    def __init__(self, model: mujoco.MjModel, profile: ActuatorProfile, config: WBCConfig = WBCConfig()):
+        self.m, self.profile, self.cfg = model, profile, config
+        self.pelvis, self.torso = model.body("pelvis").id, model.body("torso_link").id
+        self.feet = [model.body(b).id for b in FOOT_BODIES]
+        self.hands = [model.body(b).id for b in HAND_BODIES]
+        self.corners = np.stack([sole_corners(model, b) for b in FOOT_BODIES])
+        self.robot_bodies = [b for b in range(1, model.nbody) if model.body_rootid[b] == self.pelvis]
+        self.robot_mass = float(sum(model.body_mass[b] for b in self.robot_bodies))
+        self.robot_geoms = {g for g in range(model.ngeom) if model.geom_bodyid[g] in set(self.robot_bodies)}
+        self.floor = model.geom("floor").id
+        self.effort = profile.effort_limit
+        self._M = np.zeros((model.nv, model.nv))
+        self._jp, self._jr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
+
+    # --- kinematics helpers ---------------------------------------------------------------------
+    def _jac(self, d, body: int, point: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(Jp, Jr, Jdot_p qd, Jdot_r qd) of a point on ``body`` (robot columns only)."""
+        jp, jr = np.zeros((3, self.m.nv)), np.zeros((3, self.m.nv))
+        mujoco.mj_jac(self.m, d, jp, jr, point, body)
+        dp, dr = np.zeros((3, self.m.nv)), np.zeros((3, self.m.nv))
+        mujoco.mj_jacDot(self.m, d, dp, dr, point, body)
+        qd = d.qvel
+        return jp[:, :NV_ROBOT], jr[:, :NV_ROBOT], dp @ qd, dr @ qd
+
+    def com(self, d) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(c, J_com, Jdot_com qd, c_dot) of the robot (requires mj_forward's position/velocity stages)."""
+        J = np.zeros((3, self.m.nv))
+        mujoco.mj_jacSubtreeCom(self.m, d, J, self.pelvis)
+        bias = np.zeros(3)
+        dp = np.zeros((3, self.m.nv))
+        for b in self.robot_bodies:
+            mujoco.mj_jacDot(self.m, d, dp, None, d.xipos[b], b)
+            bias += self.m.body_mass[b] * (dp @ d.qvel)
+        J = J[:, :NV_ROBOT]
+        return d.subtree_com[self.pelvis].copy(), J, bias / self.robot_mass, J @ d.qvel[:NV_ROBOT]
+
+    def external_forces(self, d) -> np.ndarray:
+        """Generalized force (35,) on the robot from every contact except its own feet on the floor
+        and its self-collisions (objects, seats, other links on the floor), measured in the simulation."""
+        tau = np.zeros(NV_ROBOT)
+        f6 = np.zeros(6)
+        for i in range(d.ncon):
+            c = d.contact[i]
+            g1, g2 = c.geom1, c.geom2
+            r1, r2 = g1 in self.robot_geoms, g2 in self.robot_geoms
+            if r1 == r2:
+                continue
+            rg, other = (g1, g2) if r1 else (g2, g1)
+            if other == self.floor and self.m.geom_bodyid[rg] in self.feet:
+                continue
+            mujoco.mj_contactForce(self.m, d, i, f6)
+            f = c.frame.reshape(3, 3).T @ f6[:3]  # on geom2, world frame
+            f = f if rg == g2 else -f
+            jp = np.zeros((3, self.m.nv))
+            mujoco.mj_jac(self.m, d, jp, None, c.pos, self.m.geom_bodyid[rg])
+            tau += jp[:, :NV_ROBOT].T @ f
+        return tau
+
+    # --- the QP ---------------------------------------------------------------------------------
+    def solve(self, d, target: Target) -> Solution:
+        """One control step from the current state ``d`` (after ``mj_forward``)."""
+        m, cfg = self.m, self.cfg
+        nv = NV_ROBOT
+        stance = [k for k in range(2) if target.stance[k]]
+        nf = 12 * len(stance)
+        n = nv + nf
+        qd = d.qvel[:nv]
+        mujoco.mj_fullM(m, d, self._M)
+        M = self._M[:nv, :nv]
+        h = d.qfrc_bias[:nv] - d.qfrc_passive[:nv]
+        tau_ext = self.external_forces(d)
+
+        P = np.zeros((n, n))
+        q = np.zeros(n)
+
+        def task(J: np.ndarray, b: np.ndarray, w: float) -> None:
+            P[:nv, :nv] += w * J.T @ J
+            q[:nv] -= w * J.T @ b
+
+        c, Jc, bc, cd = self.com(d)
+        kp, kd = np.array(cfg.com_kp), np.array(cfg.com_kd)
+        task(Jc, target.com_acc + kp * (target.com - c) + kd * (target.com_vel - cd) - bc, cfg.w_com)
+        for body, w, bid in ((self.pelvis, cfg.w_pelvis, 0), (self.torso, cfg.w_torso, 1)):
+            Rref = self._ref_rotation(target, bid)
+            _, Jr, _, br = self._jac(d, body, d.xpos[body])
+            err = orientation_error(Rref, d.xmat[body].reshape(3, 3))
+            task(Jr, cfg.orient_kp * err - cfg.orient_kd * (Jr @ qd) - br, w)
+        Jfeet = {}
+        for k in range(2):
+            fb = self.feet[k]
+            Jp, Jr, bp, br = self._jac(d, fb, d.xpos[fb])
+            J6, b6 = np.vstack([Jp, Jr]), np.concatenate([bp, br])
+            v6 = J6 @ qd
+            R = d.xmat[fb].reshape(3, 3)
+            if target.stance[k]:
+                flat = _flat_of(R)
+                a = -cfg.stance_kv * v6
+                a[3:] += cfg.stance_flat_kp * orientation_error(flat, R)
+                Jfeet[k] = (J6, a - b6)
+            else:
+                ep = target.foot_pos[k] - d.xpos[fb]
+                er = orientation_error(_quat_mat(target.foot_quat[k]), R)
+                a = np.concatenate([cfg.foot_kp * ep + cfg.foot_kd * (target.foot_vel[k] - v6[:3]), cfg.orient_kp * er - cfg.orient_kd * v6[3:]])
+                task(J6, a - b6, cfg.w_swing)
+        if target.hand_pos is not None:
+            for k in range(2):
+                hb = self.hands[k]
+                Jp, _, bp, _ = self._jac(d, hb, d.xpos[hb])
+                a = cfg.hand_kp * (target.hand_pos[k] - d.xpos[hb]) - cfg.hand_kd * (Jp @ qd)
+                task(Jp, a - bp, cfg.w_hand)
+        qj, qdj = d.qpos[7 : 7 + NUM_JOINTS], qd[6:]
+        Jq = np.zeros((NUM_JOINTS, nv))
+        Jq[:, 6:] = np.eye(NUM_JOINTS)
+        task(Jq, target.qacc[6:] + cfg.posture_kp * (target.qpos[7:] - qj) + cfg.posture_kd * (target.qvel[6:] - qdj), cfg.w_posture)
+        P[:nv, :nv] += cfg.w_qdd * np.eye(nv)
+        P[nv:, nv:] += cfg.w_force * np.eye(nf)
+
+        # contact Jacobians of the stance corners (world frame)
+        Jcorner = np.zeros((nf, nv))
+        for s, k in enumerate(stance):
+            fb = self.feet[k]
+            R = d.xmat[fb].reshape(3, 3)
+            for j, p in enumerate(self.corners[k]):
+                jp = np.zeros((3, m.nv))
+                mujoco.mj_jac(m, d, jp, None, d.xpos[fb] + R @ p, fb)
+                Jcorner[12 * s + 3 * j : 12 * s + 3 * j + 3] = jp[:, :nv]
+        A = [np.hstack([M[:6], -Jcorner[:, :6].T])]
+        b = [-h[:6] + tau_ext[:6]]
+        for J6, a in (Jfeet[k] for k in stance):
+            A.append(np.hstack([J6, np.zeros((6, nf))]))
+            b.append(a)
+        A, b = np.vstack(A), np.concatenate(b)
+        G, hv = [], []
+        nc = nf // 3
+        cone = np.array([[1, 0, -cfg.mu], [-1, 0, -cfg.mu], [0, 1, -cfg.mu], [0, -1, -cfg.mu], [0, 0, -1.0]])
+        if nc:
+            Gc = np.zeros((5 * nc, n))
+            for j in range(nc):
+                Gc[5 * j : 5 * j + 5, nv + 3 * j : nv + 3 * j + 3] = cone
+            G.append(Gc)
+            hv.append(np.zeros(5 * nc))
+        Tq = np.hstack([M[6:], -Jcorner[:, 6:].T])  # tau = Tq x + h_a - tau_ext_a
+        ta = h[6:] - tau_ext[6:]
+        G += [Tq, -Tq]
+        hv += [self.effort - ta, self.effort + ta]
+        x = solve_qp(P, q, np.vstack(G), np.concatenate(hv), A, b, solver="daqp")
+        ok = x is not None
+        if not ok:  # fall back to the posture PD with gravity compensation of the current state
+            x = np.zeros(n)
+            x[6:nv] = cfg.posture_kp * (target.qpos[7:] - qj) - cfg.posture_kd * qdj
+        qdd, f = x[:nv], x[nv:]
+        tau = np.clip(Tq @ x + ta, -self.effort, self.effort)
+        return Solution(qdd, f.reshape(-1, 3), tau, self.action(d, qdd, tau), ok)
+
+    @staticmethod
+    def _ref_rotation(target: Target, which: int) -> np.ndarray:
+        return _quat_mat(target.torso_quat if which == 1 and target.torso_quat is not None else target.qpos[3:7])
+
+    def action(self, d, qdd: np.ndarray, tau: np.ndarray, hold: float = CONTROL_DT) -> np.ndarray:
+        """PD joint targets that produce ``tau`` at the predicted mid-hold state."""
+        q, qd, a = d.qpos[7 : 7 + NUM_JOINTS], d.qvel[6:NV_ROBOT], qdd[6:]
+        qm = q + qd * hold / 2 + a * hold**2 / 8
+        qdm = qd + a * hold / 2
+        return qm + (tau + self.profile.kd * qdm) / self.profile.kp
+
+
+def _flat_of(R: np.ndarray) -> np.ndarray:
+    """The level rotation with ``R``'s heading (yaw of its x axis)."""
+    yaw = np.arctan2(R[1, 0], R[0, 0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
