@@ -102,3 +102,17 @@ def build_reference(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> Refe
     none = ~stance.any(axis=1)  # never plan a flight phase: the lower foot supports
     stance[none, np.argmin(height[none], axis=1)] = True
     return Reference(fps, qpos, qvel, qacc, com, stance, foot_pos, foot_quat, height, sole, hand_pos, torso_quat)
+
+
+def place_on_floor(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
+    """``qpos`` (T, 36) with each frame's root raised or lowered so its lowest sole corner is on the floor."""
+    qpos = np.array(qpos, dtype=np.float64, copy=True)
+    d = mujoco.MjData(model)
+    feet = [model.body(b).id for b in FOOT_BODIES]
+    corners = [sole_corners(model, b) for b in FOOT_BODIES]
+    for q in qpos:
+        d.qpos[:36] = q
+        mujoco.mj_kinematics(model, d)
+        low = min((d.xpos[f] + c @ d.xmat[f].reshape(3, 3).T)[:, 2].min() for f, c in zip(feet, corners))
+        q[2] -= low
+    return qpos

@@ -55,7 +55,12 @@ def test_default_chain_writes_and_reloads_the_human_dataset(tmp_path, monkeypatc
     assert "--overwrite" in err and err.count("\n") == 1
     assert LeRobotDataset("lessmimic/default-human", root=root).num_frames == ds.num_frames
     assert not (tmp_path / "default" / ".work" / "retarget").exists()  # resume cache removed when finished
-    assert main(["physicalize"]) == 0 and "not built yet (issue #4)" in capsys.readouterr().out
+    code = main(["physicalize"])  # every clip is simulated, valid or not, and reported
+    report = json.loads((tmp_path / "default" / "logs" / "physicalized" / "report.json").read_text())
+    assert [c["task"] for c in report["clips"]] == ["PickUp", "SitStand", "Push", "Carry"]
+    assert all(c["valid"] or c["reason"] for c in report["clips"])
+    assert code == 0
+    capsys.readouterr()
     assert main(["load", str(root)]) == 0
     out = capsys.readouterr().out
     assert f"4 episodes, {ds.num_frames} frames at 30 fps" in out and "observation.joint_pos: float32 (66,)" in out

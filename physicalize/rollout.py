@@ -1,0 +1,154 @@
+"""Closed-loop tracking of a reference in MuJoCo, recorded as state-action data, and its open-loop replay.
+
+Control at 50 Hz over 200 Hz physics: at control frame ``t`` the recorded state is the
+simulation's ``(qpos, qvel)`` (robot and objects), the controller picks the joint targets
+``action[t]``, which the position actuators hold for :data:`SUBSTEPS` physics steps. Also recorded
+per frame: the actuator torques (mean over the hold), the feet's vertical contact forces, the
+robot-object contact flags per link, and any external force (``xfrc_applied``, only ever set by
+a test's ``perturb`` callback: the teacher never assists the root or the object).
+
+MuJoCo on the CPU is deterministic, so :func:`replay` of the recorded actions from the recorded
+initial state in a fresh ``MjData`` reproduces the recorded states (the self-consistency check).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from physicalize.reference import Reference
+from physicalize.wbc import FOOT_BODIES, NV_ROBOT, WholeBodyController
+from pipeline.robot import NUM_JOINTS
+from pipeline.scene import Scene, link_collision_geoms
+
+SUBSTEPS = 4
+FALL_HEIGHT_DROP = 0.30  # pelvis this far below the reference's: fallen
+FALL_TILT_COS = 0.5  # torso up-axis z below this (60 degrees): fallen
+
+
+@dataclass
+class Rollout:
+    """Recorded closed-loop trajectory (``T`` control frames; ``T`` <= the reference's when fallen)."""
+
+    qpos: np.ndarray  # (T, model.nq): robot then objects
+    qvel: np.ndarray  # (T, model.nv)
+    action: np.ndarray  # (T, 29) joint position targets held from frame t to t+1
+    torque: np.ndarray  # (T, 29) actuator torques, mean over the hold
+    foot_force: np.ndarray  # (T, 2) vertical contact force on each foot from the floor [N]
+    contact: np.ndarray  # (T, len(contact_links)) link touches an object
+    penetration: np.ndarray  # (T,) deepest contact penetration over the hold [m] (>= 0)
+    external_force: np.ndarray  # (T,) largest |xfrc_applied| over the hold [N]
+    qp_failures: int
+    fell_at: int | None
+    seconds: float
+    final_qpos: np.ndarray  # state after the last action (for the replay check)
+    final_qvel: np.ndarray
+
+    @property
+    def frames(self) -> int:
+        return self.qpos.shape[0]
+
+
+def initial_state(scene: Scene, ref: Reference, objects: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """``(qpos, qvel)``: the reference's first frame and velocity, objects at their first pose, at rest."""
+    m = scene.model
+    qpos, qvel = np.zeros(m.nq), np.zeros(m.nv)
+    qpos[:36], qvel[:NV_ROBOT] = ref.qpos[0], ref.qvel[0]
+    for name, adr in scene.object_qpos_adr.items():
+        qpos[adr : adr + 7] = objects[name][0]
+    return qpos, qvel
+
+
+def fallen(d: mujoco.MjData, ref_pelvis_z: float, torso: int) -> bool:
+    """Pelvis :data:`FALL_HEIGHT_DROP` below the reference or torso tilted past 60 degrees."""
+    return bool(d.qpos[2] < ref_pelvis_z - FALL_HEIGHT_DROP or d.xmat[torso][8] < FALL_TILT_COS)
+
+
+def _foot_forces(m, d, feet: list[int], floor: int) -> np.ndarray:
+    out, f6 = np.zeros(2), np.zeros(6)
+    for i in range(d.ncon):
+        c = d.contact[i]
+        if floor not in (c.geom1, c.geom2):
+            continue
+        other = c.geom2 if c.geom1 == floor else c.geom1
+        b = m.geom_bodyid[other]
+        if b in feet:
+            mujoco.mj_contactForce(m, d, i, f6)
+            out[feet.index(b)] += (c.frame.reshape(3, 3).T @ f6[:3])[2] * (1 if c.geom1 == floor else -1)
+    return out
+
+
+def _link_contacts(m, d, link_geoms: list[set[int]], object_geoms: set[int]) -> np.ndarray:
+    out = np.zeros(len(link_geoms), bool)
+    for i in range(d.ncon):
+        c = d.contact[i]
+        pair = {c.geom1, c.geom2}
+        if pair & object_geoms:
+            for k, g in enumerate(link_geoms):
+                if pair & g:
+                    out[k] = True
+    return out
+
+
+def simulate(scene: Scene, ref: Reference, controller: WholeBodyController, qpos0: np.ndarray, qvel0: np.ndarray, *,
+             contact_links: tuple[str, ...] = (), perturb: Callable[[int, mujoco.MjData], None] | None = None,
+             stop_on_fall: bool = True) -> Rollout:  # fmt: skip
+    """Track ``ref`` from ``(qpos0, qvel0)``; ``perturb(t, data)`` may set ``xfrc_applied`` (tests only)."""
+    m = scene.model
+    d = mujoco.MjData(m)
+    d.qpos[:], d.qvel[:] = qpos0, qvel0
+    feet = [m.body(b).id for b in FOOT_BODIES]
+    floor, torso = m.geom("floor").id, m.body("torso_link").id
+    link_geoms = [set(link_collision_geoms(m, b)) for b in contact_links]
+    object_geoms = {g for g in range(m.ngeom) if m.geom_bodyid[g] in set(scene.object_body_id.values())}
+    T = ref.frames
+    rec = {k: [] for k in ("qpos", "qvel", "action", "torque", "foot_force", "contact", "penetration", "external_force")}
+    fails, fell_at = 0, None
+    t0 = time.perf_counter()
+    for t in range(T):
+        mujoco.mj_forward(m, d)
+        rec["qpos"].append(d.qpos.copy())
+        rec["qvel"].append(d.qvel.copy())
+        rec["foot_force"].append(_foot_forces(m, d, feet, floor))
+        rec["contact"].append(_link_contacts(m, d, link_geoms, object_geoms))
+        sol = controller.solve(d, ref.target(t))
+        fails += not sol.ok
+        d.ctrl[:] = sol.action
+        tau, pen, ext = np.zeros(NUM_JOINTS), 0.0, 0.0
+        for _ in range(SUBSTEPS):
+            if perturb is not None:
+                perturb(t, d)
+            ext = max(ext, float(np.abs(d.xfrc_applied).max()))
+            mujoco.mj_step(m, d)
+            tau += d.actuator_force / SUBSTEPS
+            if d.ncon:
+                pen = max(pen, float(-d.contact.dist[: d.ncon].min()))
+        rec["action"].append(sol.action)
+        rec["torque"].append(tau)
+        rec["penetration"].append(max(pen, 0.0))
+        rec["external_force"].append(ext)
+        if fell_at is None and fallen(d, ref.qpos[min(t + 1, T - 1), 2], torso):
+            fell_at = t + 1
+            if stop_on_fall:
+                break
+    arrays = {k: np.asarray(v) for k, v in rec.items()}
+    return Rollout(**arrays, qp_failures=fails, fell_at=fell_at, seconds=time.perf_counter() - t0,
+                   final_qpos=d.qpos.copy(), final_qvel=d.qvel.copy())  # fmt: skip
+
+
+def replay(model: mujoco.MjModel, qpos0: np.ndarray, qvel0: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Open-loop replay in a fresh ``MjData``: ``(qpos (T+1, nq), qvel (T+1, nv))`` after each held action."""
+    d = mujoco.MjData(model)
+    d.qpos[:], d.qvel[:] = qpos0, qvel0
+    qs, vs = [d.qpos.copy()], [d.qvel.copy()]
+    for a in actions:
+        d.ctrl[:] = a
+        for _ in range(SUBSTEPS):
+            mujoco.mj_step(model, d)
+        qs.append(d.qpos.copy())
+        vs.append(d.qvel.copy())
+    return np.asarray(qs), np.asarray(vs)

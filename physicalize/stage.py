@@ -1,0 +1,241 @@
+"""The physicalize stage: ``datasets/<NAME>/retargeted/`` -> ``datasets/<NAME>/physicalized/``
+(LeRobot) + ``report.json``, and per clip an MCAP log and a PNG plot in ``logs/physicalized/``.
+
+Per clip: build the scene (robot + objects as free bodies moved only by contact), the tracking
+reference (:mod:`physicalize.reference`), the feasible CoM plan (:mod:`physicalize.plan`), track it
+closed loop with the teacher (``base``: :class:`physicalize.wbc.WholeBodyController`), record the
+state-action trajectory (:mod:`physicalize.rollout`), replay the actions open loop to check
+self-consistency, and measure the validity figures (:mod:`physicalize.validate`). Invalid clips stay
+in the report with their reason and are left out of the dataset unless ``keep_invalid``. A clip
+that raises is reported invalid with the error; the batch goes on. Finished clips are cached in
+``datasets/<NAME>/.work/physicalize/`` so an interrupted run resumes; the run is deterministic.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import pickle
+import shutil
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from physicalize.rollout import Rollout
+from pipeline.clip import RobotClip
+from pipeline.errors import InputError
+
+TEACHERS = ("base",)
+REPLAY_TOL_M = 1e-6
+
+
+@dataclass(frozen=True)
+class ClipResult:
+    """One clip's outcome: the simulated clip (``None`` if it raised), its rollout and figures."""
+
+    index: int
+    source: str
+    robot: RobotClip | None
+    rollout: Rollout | None
+    figures: dict
+    com: dict  # reference / planned / simulated CoM series for the plot
+
+
+def _scene_for(clip: RobotClip, profile: str):
+    from pipeline.geometry import ObjectPhysics
+    from pipeline.scene import SceneObject, build_scene
+
+    return build_scene([SceneObject(o.name, o.geometry, ObjectPhysics(mass=o.mass or 2.0), pose=tuple(o.pose[0])) for o in clip.objects], profile)
+
+
+def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", plan: bool = True, perturb=None) -> tuple[RobotClip | None, Rollout, dict, dict]:
+    """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip."""
+    from physicalize.plan import plan_com
+    from physicalize.reference import build_reference
+    from physicalize.rollout import initial_state, replay, simulate
+    from physicalize.validate import validate
+    from physicalize.wbc import WholeBodyController
+
+    t0 = time.perf_counter()
+    scene = _scene_for(clip, profile)
+    ref = build_reference(scene.model, clip.qpos, clip.fps)
+    zmp = None
+    if plan:
+        ref.com_plan, _, zmp = plan_com(ref)
+    objects = {o.name: o.pose for o in clip.objects}
+    qpos0, qvel0 = initial_state(scene, ref, objects)
+    roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile), qpos0, qvel0, contact_links=clip.contact_links, perturb=perturb)
+    roll.seconds = time.perf_counter() - t0  # planning + tracking
+    figures = validate(scene, roll, clip.qpos, objects)
+    qs, _ = replay(scene.model, qpos0, qvel0, roll.action)
+    figures["replay_err_max_m"] = float(np.abs(np.vstack([qs[:-1] - roll.qpos, qs[-1:] - roll.final_qpos])).max())
+    if figures["replay_err_max_m"] > REPLAY_TOL_M and perturb is None:
+        figures["valid"] = False
+        figures["reason"] = "; ".join(filter(None, [figures["reason"], f"replay error {figures['replay_err_max_m']:.3g} m > {REPLAY_TOL_M:g}"]))
+    T = roll.frames
+    sim_objects = tuple(replace(o, pose=roll.qpos[:, scene.object_qpos_adr[o.name] : scene.object_qpos_adr[o.name] + 7],
+                                contact=None if o.contact is None else o.contact[:T]) for o in clip.objects)  # fmt: skip
+    robot = RobotClip(
+        roll.qpos[:, :36], clip.fps, clip.source, objects=sim_objects, contact_links=clip.contact_links,
+        contacts=roll.contact if clip.contact_links else None, method="lessmimic-wbc", task=clip.task,
+        provenance={**clip.provenance, "teacher": "base", "actuator_profile": profile, "reference": "feasible" if plan else "raw"},
+    )  # fmt: skip
+    com = {"reference": ref.com[:T], "planned": (ref.com_plan if plan else ref.com)[:T], "zmp_planned": None if zmp is None else zmp[:T],
+           "simulated": _sim_com(scene.model, roll.qpos), "pelvis_ref": clip.qpos[:T, 2], "pelvis_sim": roll.qpos[:, 2]}  # fmt: skip
+    return robot, roll, figures, com
+
+
+def _sim_com(model, qpos: np.ndarray) -> np.ndarray:
+    import mujoco
+
+    d = mujoco.MjData(model)
+    out = np.zeros((len(qpos), 3))
+    for t, q in enumerate(qpos):
+        d.qpos[:] = q
+        mujoco.mj_kinematics(model, d)
+        mujoco.mj_comPos(model, d)
+        out[t] = d.subtree_com[model.body("pelvis").id]
+    return out
+
+
+def _cache_key(clip: RobotClip, index: int, teacher: str, profile: str) -> str:
+    h = hashlib.sha256(np.ascontiguousarray(clip.qpos).tobytes())
+    for o in clip.objects:
+        h.update(np.ascontiguousarray(o.pose).tobytes())
+    h.update(f"{clip.source}|{index}|{teacher}|{profile}".encode())
+    return h.hexdigest()[:16]
+
+
+def _run_one(index: int, clip: RobotClip, work: Path, teacher: str, profile: str) -> ClipResult:
+    cached = work / f"{_cache_key(clip, index, teacher, profile)}.pkl"
+    if cached.is_file():
+        return pickle.loads(cached.read_bytes())
+    try:
+        robot, roll, figures, com = physicalize_clip(clip, profile=profile)
+        result = ClipResult(index, clip.source, robot, roll, figures, com)
+    except Exception as exc:  # noqa: BLE001 - a clip that cannot be simulated is reported, the batch goes on
+        result = ClipResult(index, clip.source, None, None, {"valid": False, "reason": f"error: {type(exc).__name__}: {exc}"}, {})
+    tmp = cached.with_suffix(".tmp")
+    tmp.write_bytes(pickle.dumps(result))
+    tmp.replace(cached)
+    return result
+
+
+CARD_NOTES = [
+    "Each episode is a closed-loop MuJoCo simulation (200 Hz physics, 50 Hz control) of the G1 tracking a retargeted clip "
+    "with a training-free whole-body QP controller (the `base` teacher) on a dynamically feasible CoM plan (ZMP preview "
+    "control over the clip's foot support schedule). Objects are free bodies moved only by contact: no welds, no "
+    "external or root assist forces.",
+    "`action` is the 29 joint position targets the position actuators held from frame t to t+1 (actuator profile in the "
+    "card header); `observation.torque` the actuator torques applied (mean over the 4 physics steps of the hold).",
+    "`observation.state`/`observation.qvel` are the simulation's qpos/qvel (root linear velocity world frame, root angular "
+    "velocity body frame); `reference.state` the retargeted qpos the controller tracked.",
+    "Replaying `action` open loop from the first frame's state (and the objects' first poses, at rest) in MuJoCo "
+    "reproduces the states (checked per clip: `replay_err_max_m` in report.json).",
+    "Per-clip validity figures are in each episode's metadata and in `report.json`; invalid clips are not in the dataset "
+    "unless the stage ran with --keep-invalid.",
+]
+
+
+def _episodes(results: list[ClipResult], fps: int):
+    from pipeline.clip_dataset import robot_clips_to_episodes
+    from pipeline.dataset import Feature
+    from pipeline.robot import G1_JOINT_NAMES, QPOS_NAMES
+
+    features, episodes = robot_clips_to_episodes([r.robot for r in results])
+    for f in features:
+        if f.name == "observation.qvel":
+            object.__setattr__(f, "description", "G1 qvel from the simulation: root linear velocity (world), root angular velocity (body), joint velocities")
+    features += [
+        Feature("action", "float32", G1_JOINT_NAMES, "joint position targets held for the next 20 ms", "rad"),
+        Feature("observation.torque", "float32", G1_JOINT_NAMES, "applied actuator torques (mean over the hold)", "N m"),
+        Feature("observation.foot_force", "float32", ("left", "right"), "vertical floor contact force on each foot", "N"),
+        Feature("reference.state", "float32", QPOS_NAMES, "retargeted qpos tracked at this frame", "m, rad"),
+    ]  # fmt: skip
+    names = [o.name for o in results[0].robot.objects]
+    features += [Feature(f"object.{n}.vel", "float32", ("vx", "vy", "vz", "wx", "wy", "wz"), f"object {n!r} velocity (linear world, angular body)", "m/s, rad/s") for n in names]
+    for ep, r in zip(episodes, results):
+        roll, T = r.rollout, r.robot.frames
+        ep.data["observation.qvel"] = roll.qvel[:, :35]
+        ep.data.update({"action": roll.action, "observation.torque": roll.torque, "observation.foot_force": roll.foot_force,
+                        "reference.state": r.com["reference_qpos"][:T]})  # fmt: skip
+        for n in names:
+            adr = 35 + 6 * names.index(n)
+            ep.data[f"object.{n}.vel"] = roll.qvel[:, adr : adr + 6]
+        ep.meta.update({"kind": "robot", "stage": "physicalized", "validation": r.figures})
+    return features, episodes
+
+
+def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", profile: str = "mjlab", keep_invalid: bool = False) -> dict:
+    """``lessmimic physicalize``: simulate every retargeted clip, write the dataset, report and logs."""
+    from pipeline.clip_dataset import episodes_to_robot_clips
+    from pipeline.dataset import write_dataset
+    from pipeline.dataset_card import DatasetCard
+    from pipeline.dataset_write import check_target
+    from pipeline.ingest import file_stem, stage_dir, write_json_atomic
+    from pipeline.inspect_log import write_robot_log
+    from pipeline.robot import actuator_profile
+    from physicalize.plot import plot_physicalized
+    from physicalize.validate import summarise
+
+    if teacher not in TEACHERS:
+        raise InputError(teacher, "--teacher", f"unknown teacher; available: {', '.join(TEACHERS)}")
+    try:
+        prof = actuator_profile(profile)
+    except ValueError as exc:
+        raise InputError(profile, "--profile", str(exc)) from None
+    src, out = stage_dir(name, "retargeted"), stage_dir(name, "physicalized")
+    if not (src / "meta" / "info.json").is_file():
+        raise InputError(src, "meta/info.json", "no retargeted dataset here: run `lessmimic retarget --name NAME` first")
+    check_target(out, overwrite)
+    clips = episodes_to_robot_clips(src)
+    t0 = time.perf_counter()
+    work = out.parent / ".work" / "physicalize"
+    if overwrite:
+        shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True, exist_ok=True)
+    results = [_run_one(i, c, work, teacher, prof.name) for i, c in enumerate(tqdm(clips, desc="physicalize", unit="clip"))]
+    for r, c in zip(results, clips):
+        if r.com:
+            r.com["reference_qpos"] = c.qpos
+    per_clip = [{"episode": r.index, "source": r.source, "task": clips[r.index].task, **r.figures} for r in results]
+    kept = [r for r in results if r.robot is not None and (r.figures["valid"] or keep_invalid)]
+    simulated = sum(r.rollout.frames for r in results if r.rollout is not None) / clips[0].fps if clips else 0.0
+    report = {
+        "stage": "physicalized", "teacher": teacher, "actuator_profile": prof.name, "keep_invalid": keep_invalid,
+        "clips": per_clip, "summary": {**summarise([c for c in per_clip if "frames" in c] or per_clip),
+                                         "valid_frac": float(np.mean([c["valid"] for c in per_clip])) if per_clip else 0.0,
+                                         "realtime_factor": simulated / max(sum(r.rollout.seconds for r in results if r.rollout), 1e-9),
+                                         "episodes_written": len(kept)},
+    }  # fmt: skip
+    for c in per_clip:
+        if not c["valid"]:
+            print(f"invalid: {c['source']}: {c['reason']}")
+    if kept:
+        fps = int(round(clips[0].fps))
+        features, episodes = _episodes(kept, fps)
+        synthetic = any(r.robot.provenance.get("synthetic") for r in kept)
+        card = DatasetCard(
+            title=f"{name}: G1 physicalized state-action data",
+            description=("SYNTHETIC demonstrations: " if synthetic else "") + "retargeted G1 motion made physically valid by "
+            "closed-loop tracking in MuJoCo (whole-body QP teacher); every episode carries its validation figures.",
+            provenance=[r.source for r in kept] + [str(src)], fps=fps, synthetic=synthetic, stage="physicalized",
+            actuator_profile=f"{prof.name}: {prof.description}", license="apache-2.0" if synthetic else "other",
+            feature_frames={f.name: "world, z-up" if f.name.startswith("object.") else "" for f in features}, notes=CARD_NOTES,
+        )  # fmt: skip
+        write_dataset(out, f"lessmimic/{name}-physicalized", fps, features, episodes, card=card, overwrite=overwrite)
+    report["seconds_wall"] = time.perf_counter() - t0
+    logs = out.parent / "logs" / "physicalized"
+    write_json_atomic(logs / "report.json", report)  # also where it lives when no clip was valid
+    if kept:
+        write_json_atomic(out / "report.json", report)
+    for r in tqdm([r for r in results if r.robot is not None], desc="logs and plots", unit="clip"):
+        stem = f"{r.index:03d}_{file_stem(r.source)}"
+        write_robot_log(r.robot, logs / f"{stem}.mcap")
+        objs = {o.name: (clips[r.index].objects[k].pose[:, 2], o.pose[:, 2]) for k, o in enumerate(r.robot.objects)}
+        title = f"{r.source} ({r.robot.task or 'no task'}): {'valid' if r.figures['valid'] else 'INVALID: ' + r.figures['reason']}"
+        plot_physicalized(r.com, r.rollout.foot_force, objs, r.robot.fps, title[:150], logs / f"{stem}.png")
+    shutil.rmtree(work, ignore_errors=True)
+    return report

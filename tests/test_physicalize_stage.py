@@ -1,0 +1,79 @@
+"""The physicalize stage end to end on small hand-made retargeted datasets (real MuJoCo, real LeRobot)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from physicalize.reference import place_on_floor
+from physicalize.stage import _run_one
+from pipeline.cli import main
+from pipeline.clip import ObjectTrack, RobotClip
+from pipeline.clip_dataset import robot_clips_to_episodes
+from pipeline.dataset import write_dataset
+from pipeline.geometry import Primitive
+from pipeline.ingest import stage_dir
+from pipeline.robot import default_qpos, actuator_profile
+from pipeline.scene import build_scene
+
+BOX = Primitive("box", (0.15, 0.15, 0.15))
+
+
+def _clips() -> list[RobotClip]:
+    model = build_scene().model
+    stand = place_on_floor(model, np.repeat(default_qpos(actuator_profile("mjlab"))[None], 60, 0))
+    jump = stand.copy()
+    jump[30:, 0] += 0.6  # the reference teleports 0.6 m: no physical motion follows it
+    box = np.tile([0.8, 0.0, 0.15, 1.0, 0.0, 0.0, 0.0], (60, 1))
+    return [RobotClip(q, 50, f"hand-made:{name}", objects=(ObjectTrack("box", BOX, box.copy(), None, 1.0, "hand-made"),), task=name)
+            for name, q in (("stand", stand), ("teleport", jump))]  # fmt: skip
+
+
+@pytest.fixture
+def retargeted(tmp_path, monkeypatch):
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path))
+    features, episodes = robot_clips_to_episodes(_clips())
+    write_dataset(stage_dir("hand", "retargeted"), "lessmimic/hand-retargeted", 50, features, episodes)
+    return tmp_path
+
+
+def test_valid_clip_written_invalid_one_reported(retargeted, capsys):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    assert main(["physicalize", "--name", "hand"]) == 0
+    out = capsys.readouterr().out
+    assert "invalid: hand-made:teleport: " in out and "root_pos_err_max_m" in out
+    root = stage_dir("hand", "physicalized")
+    report = json.loads((root / "report.json").read_text())
+    stand, jump = report["clips"]
+    assert stand["valid"] and stand["replay_err_max_m"] <= 1e-6 and stand["object_pos_err_m"] < 0.01
+    assert not jump["valid"] and jump["reason"]
+    assert report["summary"]["valid_frac"] == 0.5 and report["summary"]["episodes_written"] == 1
+    ds = LeRobotDataset("lessmimic/hand-physicalized", root=root)
+    assert ds.num_episodes == 1 and ds.num_frames == 60
+    for key, dim in (("action", 29), ("observation.torque", 29), ("observation.state", 36), ("observation.qvel", 35),
+                     ("object.box.pose", 7), ("object.box.vel", 6), ("reference.state", 36)):  # fmt: skip
+        assert tuple(ds.features[key]["shape"]) == (dim,)
+    assert "mjlab" in (root / "README.md").read_text()
+    logs = retargeted / "hand" / "logs" / "physicalized"
+    assert (logs / "001_hand-made_teleport.png").is_file() and (logs / "000_hand-made_stand.mcap").is_file()
+    assert main(["physicalize", "--name", "hand"]) == 2  # exists: needs --overwrite
+    assert main(["physicalize", "--name", "hand", "--overwrite", "--keep-invalid"]) == 0
+    assert LeRobotDataset("lessmimic/hand-physicalized", root=root).num_episodes == 2
+
+
+def test_bad_arguments_are_one_line_errors(retargeted, capsys):
+    assert main(["physicalize", "--name", "hand", "--profile", "nope"]) == 2
+    assert main(["physicalize", "--name", "missing"]) == 2
+    assert main(["physicalize", "--name", "hand", "--teacher", "residual"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3 and "unknown actuator profile" in err[0] and "no retargeted dataset" in err[1] and "unknown teacher" in err[2]
+    assert not stage_dir("hand", "physicalized").exists()
+
+
+def test_a_finished_clip_is_resumed_from_the_cache(tmp_path):
+    clip = _clips()[0]
+    first = _run_one(0, clip, tmp_path, "base", "mjlab")
+    assert len(list(tmp_path.glob("*.pkl"))) == 1
+    again = _run_one(0, clip, tmp_path, "base", "mjlab")
+    assert np.array_equal(first.rollout.action, again.rollout.action) and again.figures == first.figures
