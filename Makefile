@@ -14,7 +14,7 @@ JOBS ?= 1
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install retarget physicalize features test test-fast bench bench-retarget clean-venv
+.PHONY: install retarget physicalize features test test-fast bench bench-retarget bench-physicalize clean-venv
 
 install: $(VENV)/.installed
 
@@ -47,6 +47,9 @@ bench: install
 
 bench-retarget: install
 	$(PY) bench/bench_retarget.py
+
+bench-physicalize: install
+	$(PY) bench/bench_physicalize.py
 
 clean-venv:
 	rm -rf $(VENV)

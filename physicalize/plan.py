@@ -99,7 +99,7 @@ def plan_com(ref: Reference) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     x = np.zeros((3, 2))
     x[0] = ref.com[0, :2]
     if T > 2:
-        x[1] = (ref.com[1, :2] - ref.com[0, :2]) / dt
+        x[1] = np.median(np.diff(ref.com[:6, :2], axis=0), axis=0) / dt  # as the initial state's velocity
     err = np.zeros(2)
     com, zmp = np.zeros((T, 2)), np.zeros((T, 2))
     for k in range(T):

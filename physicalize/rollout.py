@@ -54,10 +54,12 @@ class Rollout:
 
 
 def initial_state(scene: Scene, ref: Reference, objects: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """``(qpos, qvel)``: the reference's first frame and velocity, objects at their first pose, at rest."""
+    """``(qpos, qvel)``: the reference's first frame, its velocity (the median over the first 5 frames:
+    a retargeted clip's first frame is solved on its own and its finite difference can jump), objects
+    at their first pose, at rest."""
     m = scene.model
     qpos, qvel = np.zeros(m.nq), np.zeros(m.nv)
-    qpos[:36], qvel[:NV_ROBOT] = ref.qpos[0], ref.qvel[0]
+    qpos[:36], qvel[:NV_ROBOT] = ref.qpos[0], np.median(ref.qvel[:5], axis=0)
     for name, adr in scene.object_qpos_adr.items():
         qpos[adr : adr + 7] = objects[name][0]
     return qpos, qvel

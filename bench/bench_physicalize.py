@@ -1,0 +1,67 @@
+"""Physicalize validity and speed per clip, with the raw retargeted reference vs the feasible (ZMP
+preview-planned) reference, side by side.
+
+Run: ``make bench-physicalize``. Clips: the four embedded default clips and, when ``../shared/mocap``
+is present, the OMOMO box clip, the InterMimic table clip and the PyMO walk. Each clip is first
+retargeted (not timed), then physicalized by :func:`physicalize.stage.physicalize_clip` (timed:
+scene build, reference, plan and closed-loop tracking on one core). ``rt`` is simulated seconds
+per wall second; the issue's bar is >= 5.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import torch
+
+torch.set_num_threads(1)
+
+from physicalize.stage import physicalize_clip  # noqa: E402
+from pipeline.default_input import default_clips  # noqa: E402
+from pipeline.readers import read_clips  # noqa: E402
+from retarget.stage import retarget_clip  # noqa: E402
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
+REAL = ["omomo/sub3_largebox_003.pt", "intermimic/sub2_largetable_000.pt", "bvh/pymo_walk_120hz.bvh"]
+COLUMNS = [("valid", "valid"), ("fell", "fell"), ("frames_simulated", "sim/ref"), ("mpjpe_m", "mpjpe"), ("root_pos_err_max_m", "root max"),
+           ("foot_slide_frac_1cm_per_frame", "slide"), ("penetration_max_m", "pen max"), ("torque_saturation_frac", "sat"),
+           ("object_pos_err_m", "obj err"), ("realtime_factor", "rt")]  # fmt: skip
+
+
+def _clips():
+    for c in default_clips():
+        yield f"synthetic:{c.task}", c
+    for rel in REAL:
+        path = SHARED / rel
+        if path.is_file():
+            yield path.name, read_clips(path)[0]
+        else:
+            print(f"(skipped {rel}: ../shared/mocap not present)", file=sys.stderr)
+
+
+def _cell(key, f) -> str:
+    v = f.get(key, float("nan"))
+    if key == "frames_simulated":
+        return f"{v}/{f['frames']}"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    return f"{v:.3f}"
+
+
+def main() -> None:
+    print(f"{'clip':24s}{'reference':11s}" + "".join(f"{h:>10s}" for _, h in COLUMNS) + "  reason")
+    valid = {"raw": [], "feasible": []}
+    for name, human in _clips():
+        robot, _, _ = retarget_clip(human)
+        for plan in (False, True):
+            _, _, f, _ = physicalize_clip(robot, plan=plan)
+            kind = "feasible" if plan else "raw"
+            valid[kind].append(f["valid"])
+            print(f"{name:24s}{kind:11s}" + "".join(f"{_cell(k, f):>10s}" for k, _ in COLUMNS) + f"  {f['reason'][:60]}", flush=True)
+    for kind, v in valid.items():
+        print(f"valid fraction ({kind} reference): {sum(v)}/{len(v)} = {sum(v) / max(len(v), 1):.2f}")
+
+
+if __name__ == "__main__":
+    main()
