@@ -7,7 +7,6 @@ force on each foot; (4) object heights, reference vs simulated (when the clip ha
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import matplotlib
@@ -15,6 +14,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+from pipeline.figure import save_figure  # noqa: E402
 
 
 def plot_physicalized(com: dict, foot_force: np.ndarray, objects: dict[str, tuple[np.ndarray, np.ndarray]], fps: float,
@@ -42,9 +43,4 @@ def plot_physicalized(com: dict, foot_force: np.ndarray, objects: dict[str, tupl
     axes[3].set_xlabel("time (s)")
     fig.suptitle(title)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.png")
-    fig.savefig(tmp, dpi=80)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    return save_figure(fig, path, dpi=80)

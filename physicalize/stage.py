@@ -139,7 +139,7 @@ CARD_NOTES = [
 ]
 
 
-def _episodes(results: list[ClipResult], fps: int):
+def _episodes(results: list[ClipResult]):
     from pipeline.clip_dataset import robot_clips_to_episodes
     from pipeline.dataset import Feature
     from pipeline.robot import G1_JOINT_NAMES, QPOS_NAMES
@@ -215,7 +215,7 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
             print(f"invalid: {c['source']}: {c['reason']}")
     if kept:
         fps = int(round(clips[0].fps))
-        features, episodes = _episodes(kept, fps)
+        features, episodes = _episodes(kept)
         synthetic = any(r.robot.provenance.get("synthetic") for r in kept)
         card = DatasetCard(
             title=f"{name}: G1 physicalized state-action data",

@@ -27,6 +27,7 @@ import mujoco
 import numpy as np
 
 from physicalize.rollout import SUBSTEPS, Rollout
+from physicalize.wbc import FOOT_BODIES
 from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES
 from pipeline.scene import Scene
 
@@ -94,8 +95,7 @@ def validate(scene: Scene, rollout: Rollout, ref_qpos: np.ndarray, ref_objects: 
     bodies = [m.body(b).id for b in G1_LINK_NAMES]
     sim_links = _link_positions(m, q[:, :36], bodies)
     ref_links = _link_positions(m, ref_qpos[:T], bodies)
-    feet = [m.body(b).id for b in ("left_ankle_roll_link", "right_ankle_roll_link")]
-    foot_xy = _link_positions(m, q[:, :36], feet)[..., :2]
+    foot_xy = sim_links[:, [G1_LINK_NAMES.index(b) for b in FOOT_BODIES], :2]
     root_err = np.linalg.norm(q[:, :3] - ref_qpos[:T, :3], axis=1)
     figures = {
         "frames": T_ref, "frames_simulated": T,

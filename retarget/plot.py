@@ -12,7 +12,6 @@ Three panels over time:
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import matplotlib
@@ -23,6 +22,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from pipeline.clip import HumanClip, RobotClip  # noqa: E402
+from pipeline.figure import save_figure  # noqa: E402
 from pipeline.foot_contact import detect_foot_contacts  # noqa: E402
 from pipeline.metrics import scene_for  # noqa: E402
 
@@ -85,9 +85,4 @@ def plot_clip(robot: RobotClip, human: HumanClip, path: Path) -> Path:
         ax.legend(loc="upper right", fontsize=7)
     fig.suptitle(f"{robot.source} ({robot.task or 'no task'}){' [SYNTHETIC]' if robot.provenance.get('synthetic') else ''}")
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.png")
-    fig.savefig(tmp, dpi=90)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    return save_figure(fig, path, dpi=90)
