@@ -77,3 +77,45 @@ def test_a_finished_clip_is_resumed_from_the_cache(tmp_path):
     assert len(list(tmp_path.glob("*.pkl"))) == 1
     again = _run_one(0, clip, tmp_path, "base", "mjlab")
     assert np.array_equal(first.rollout.action, again.rollout.action) and again.figures == first.figures
+
+
+@pytest.mark.slow
+def test_kill_9_mid_run_then_rerun_gives_the_same_dataset(tmp_path):
+    """A run killed (SIGKILL) after its first clip resumes from the cache and writes the dataset a clean run writes."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    import pandas as pd
+
+    roots = {}
+    for run in ("killed", "clean"):
+        root = roots[run] = tmp_path / run
+        features, episodes = robot_clips_to_episodes(_clips())
+        env = {**os.environ, "LESSMIMIC_DATASETS": str(root), "HF_HUB_OFFLINE": "1"}
+        cmd = [sys.executable, "-m", "pipeline.cli", "physicalize", "--name", "hand", "--keep-invalid"]
+        os.environ["LESSMIMIC_DATASETS"] = str(root)
+        try:
+            write_dataset(stage_dir("hand", "retargeted"), "lessmimic/hand-retargeted", 50, features, episodes)
+        finally:
+            del os.environ["LESSMIMIC_DATASETS"]
+        if run == "killed":
+            proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            cache = root / "hand" / ".work" / "physicalize"
+            deadline = time.monotonic() + 300
+            while not list(cache.glob("*.pkl")) and proc.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert proc.poll() is None, "the run finished before it could be killed"
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait()
+            assert len(list(cache.glob("*.pkl"))) == 1 and not (root / "hand" / "physicalized").exists()
+        assert subprocess.run(cmd, env=env, capture_output=True).returncode == 0
+    data = {run: pd.concat([pd.read_parquet(p) for p in sorted((r / "hand" / "physicalized" / "data").rglob("*.parquet"))])
+            for run, r in roots.items()}  # fmt: skip
+    assert data["clean"]["episode_index"].nunique() == 2
+    pd.testing.assert_frame_equal(data["killed"], data["clean"])
+    reports = {run: json.loads((r / "hand" / "physicalized" / "report.json").read_text())["clips"] for run, r in roots.items()}
+    timing = ("realtime_factor",)
+    assert [{k: v for k, v in c.items() if k not in timing} for c in reports["killed"]] == [{k: v for k, v in c.items() if k not in timing} for c in reports["clean"]]
