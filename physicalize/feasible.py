@@ -2,30 +2,37 @@
 so that its centre of mass follows the dynamically feasible plan (:mod:`physicalize.plan`) while
 feet, hands and posture follow the retargeted motion.
 
-Per frame ``t`` (warm-started from frame ``t-1``'s solution, :attr:`FeasibleConfig.iterations`
+Per frame ``t`` (warm-started from frame ``t-1``'s solution, up to :attr:`FeasibleConfig.iterations`
 QP steps, one :func:`mink.solve_ik` each, in displacement units ``dt = 1``)::
 
-    min_dq   w_c^2 ||J_c dq + c(q) - c*_t||^2                             (ComTask: the plan)
+    min_dq   ||W_c (J_c dq + c(q) - c*_t)||^2                             (ComTask: the plan)
            + sum_{swing feet, hands} ||W_b (J_b dq + e_b(q, X*_{b,t}))||^2 (FrameTask: reference poses)
            + ||W_o (J_o dq + e_o)||^2   pelvis and torso orientation      (FrameTask, orientation only)
-           + w_p^2 ||dq - (q*_t - q)||^2                                  (PostureTask: reference joints)
-           + lambda ||dq||^2
-    s.t.     J_f dq = -e_f(q, F_{f,t})        every stance foot f          (equality: the footstep)
+           + ||W_p (dq - (q*_t - q))||^2                                  (PostureTask: reference joints)
+           + (lambda + mu) ||dq||^2,   mu = lm * sum_i ||W_i e_i||^2
+    s.t.     J_f dq = -e_f(q, F_{f,t})        every planted foot f        (equality: its footstep)
              dq_i = 0                          every dof of a free object  (DofFreezingTask)
              q_min <= q + dq <= q_max                                      (ConfigurationLimit)
+             q_knee + dq_knee >= min_knee                                  (MinimumJointLimit)
              |q + dq - q_{t-1}| <= v_max / fps                             (per-frame joint speed)
 
 with ``q*_t`` the reference configuration and ``X*_{b,t}`` its link poses (forward kinematics of the
-reference), ``c*_t`` the planned CoM (height kept from the reference by the planner). If the
-equality-constrained QP is infeasible at a step (stance feet and speed limits incompatible), that
-step is taken with the stance feet as high-cost tasks instead (counted in ``stats``).
+reference), ``c*_t`` the planned CoM (its height is the reference's: the CoM's z cost is lower, so
+the IK may lower the CoM where the legs cannot reach). ``lambda`` is a plain LM damping (a step's
+joint motion has a cost: a nearly straight leg does not oscillate) and ``mu`` mink's error-scaled
+damping (an unreachable CoM target is approached in small steps, not by chattering between far
+configurations that miss the footstep constraint in the true kinematics). If the QP with the
+footstep equalities is infeasible at a step, that step is taken with the planted feet as
+high-cost tasks instead (counted in ``stats``).
 
 Foot targets (:func:`foot_targets`): during each stance run of the reference's support schedule the
 foot is pinned to one **footstep**: the reference's horizontal position and heading at the run's
 slowest frame, sole flat on the floor (``z = 0``; the whole-body controller also holds stance feet
-flat). Swing feet follow the reference with an offset (position and rotation vector) blended
-linearly from the previous footstep's to the next one's, so a foot lifts off and lands on its
-footsteps without a jump.
+flat), over the run's **planted** frames (those where the reference foot is within
+:attr:`FeasibleConfig.footstep_tolerance` of the footstep: a low foot still sliding in to land or
+out to lift off is not pinned). Other frames follow the reference with an offset (position and
+rotation vector) blended linearly from the previous footstep's to the next one's, so a foot lifts
+off and lands on its footsteps without a jump.
 
 :func:`feasible_reference` chains plan -> IK -> :class:`~physicalize.reference.Reference` of the
 re-solved motion (the original stance schedule kept, ``com_plan`` set), optionally re-planning on
@@ -68,6 +75,7 @@ class FeasibleConfig:
     torso_orientation_cost: float = 3.0
     posture_cost: float = 0.3
     damping: float = 1.0  # per rad^2 of step: keeps a nearly straight leg from oscillating
+    task_lm_damping: float = 1.0  # mink's error-scaled damping (mu = lm ||W e||^2): small steps toward unreachable targets
     iterations: int = 3  # at most this many QP steps per frame ...
     tolerance: float = 1e-3  # ... stopping after a step below this [rad]
     init_iterations: int = 30  # first frame (no speed limit)
@@ -181,11 +189,12 @@ class ReferenceIK:
         cfg = config
         self.configuration = mink.Configuration(model)
         self.sole_z = np.array([sole_corners(model, b)[0, 2] for b in FOOT_BODIES])
-        self.feet = [mink.FrameTask(b, "body", cfg.swing_position_cost, cfg.swing_orientation_cost) for b in FOOT_BODIES]
-        self.hands = [mink.FrameTask(b, "body", cfg.hand_position_cost, cfg.hand_orientation_cost) for b in HAND_BODIES]
-        self.pelvis = mink.FrameTask("pelvis", "body", 0.0, cfg.pelvis_orientation_cost)
-        self.torso = mink.FrameTask("torso_link", "body", 0.0, cfg.torso_orientation_cost)
-        self.com = mink.ComTask(cost=cfg.com_cost)
+        lm = cfg.task_lm_damping
+        self.feet = [mink.FrameTask(b, "body", cfg.swing_position_cost, cfg.swing_orientation_cost, lm_damping=lm) for b in FOOT_BODIES]
+        self.hands = [mink.FrameTask(b, "body", cfg.hand_position_cost, cfg.hand_orientation_cost, lm_damping=lm) for b in HAND_BODIES]
+        self.pelvis = mink.FrameTask("pelvis", "body", 0.0, cfg.pelvis_orientation_cost, lm_damping=lm)
+        self.torso = mink.FrameTask("torso_link", "body", 0.0, cfg.torso_orientation_cost, lm_damping=lm)
+        self.com = mink.ComTask(cost=cfg.com_cost, lm_damping=lm)
         self.posture = mink.PostureTask(model, cost=cfg.posture_cost)
         self.config_limit = mink.ConfigurationLimit(model)
         self.knee_limit = MinimumJointLimit(model, {"left_knee_joint": cfg.min_knee, "right_knee_joint": cfg.min_knee})
