@@ -77,7 +77,7 @@ class FeasibleConfig:
     damping: float = 1.0  # per rad^2 of step: keeps a nearly straight leg from oscillating
     task_lm_damping: float = 1.0  # mink's error-scaled damping (mu = lm ||W e||^2): small steps toward unreachable targets
     iterations: int = 3  # at most this many QP steps per frame ...
-    tolerance: float = 1e-3  # ... stopping after a step below this [rad]
+    tolerance: float = 2e-4  # ... stopping once every planted foot and the CoM are this close to their targets [m]
     init_iterations: int = 30  # first frame (no speed limit)
     velocity_limit_factor: float = 1.0  # of the rated motor speeds
     exact_stance: bool = True  # stance feet as equality constraints (else high-cost tasks)
@@ -274,12 +274,17 @@ class ReferenceIK:
             else:
                 self.velocity_limit.start_frame(c.q)
                 for _ in range(cfg.iterations):
-                    if self._step(tasks, stance) < cfg.tolerance:
+                    self._step(tasks, stance)
+                    if self._converged(stance):
                         break
             out[t] = c.q[:NQ_ROBOT]
         dt = time.perf_counter() - t0
         self.stats = {"frames": T, "seconds": dt, "ms_per_frame": 1e3 * dt / max(T, 1), "relaxed_steps": self._relaxed, "failed_steps": self._failed}
         return out
+
+    def _converged(self, stance_tasks: list) -> bool:
+        c, tol = self.configuration, self.cfg.tolerance
+        return bool(np.linalg.norm(self.com.compute_error(c)) < tol and all(np.linalg.norm(s.compute_error(c)[:3]) < tol for s in stance_tasks))
 
     def _step_free(self, tasks: list, stance_tasks: list) -> None:
         """A first-frame step: no speed limit."""
@@ -297,18 +302,25 @@ def resolve_reference(model: mujoco.MjModel, ref: Reference, com_plan: np.ndarra
     return ReferenceIK(model, config).solve(ref, com_plan)
 
 
-def feasible_reference(model: mujoco.MjModel, ref: Reference, plan_fn: Callable = plan_com, *, replan: bool = True,
+def feasible_reference(model: mujoco.MjModel, ref: Reference, plan_fn: Callable = plan_com, *, passes: int = 1, replan: bool = False,
                        config: FeasibleConfig = FeasibleConfig(), stats: dict | None = None) -> Reference:  # fmt: skip
     """The reference to track: plan the CoM on ``ref`` (``plan_fn(ref)[0]``), re-solve the whole body
     to it, and build the :class:`Reference` of the re-solved motion with ``ref``'s stance schedule and
-    ``com_plan`` set (re-planned on the re-solved reference if ``replan``). ``stats`` (if given) gets
-    the IK's figures and the CoM error of the re-solve."""
-    com_plan = plan_fn(ref)[0]
+    ``com_plan`` set. With ``passes`` > 1, each further pass plans on the previous pass's re-solved
+    reference (its support polygons are the footsteps the IK kept) and re-solves ``ref``'s motion to
+    that plan; ``replan`` plans once more on the final re-solved reference without re-solving (then
+    ``com_plan`` and the re-solved CoM differ). ``stats`` (if given) gets the last IK's figures, the
+    IK time of all passes and the CoM error of the last re-solve."""
+    if passes < 1:
+        raise ValueError("feasible_reference: passes must be >= 1")
     ik = ReferenceIK(model, config)
-    qpos = ik.solve(ref, com_plan)
-    out = build_reference(model, qpos, ref.fps)
-    out.stance = ref.stance.copy()
+    planned_on, seconds = ref, 0.0
+    for _ in range(passes):
+        com_plan = plan_fn(planned_on)[0]
+        out = build_reference(model, ik.solve(ref, com_plan), ref.fps)
+        out.stance = ref.stance.copy()
+        planned_on, seconds = out, seconds + ik.stats["seconds"]
     out.com_plan = plan_fn(out)[0] if replan else com_plan
     if stats is not None:
-        stats.update(ik.stats, com_err_max_m=float(np.linalg.norm(out.com - com_plan, axis=1).max()))
+        stats.update(ik.stats, ik_seconds=seconds, com_err_max_m=float(np.linalg.norm(out.com - com_plan, axis=1).max()))
     return out
