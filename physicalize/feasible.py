@@ -310,17 +310,22 @@ def feasible_reference(model: mujoco.MjModel, ref: Reference, plan_fn: Callable 
     reference (its support polygons are the footsteps the IK kept) and re-solves ``ref``'s motion to
     that plan; ``replan`` plans once more on the final re-solved reference without re-solving (then
     ``com_plan`` and the re-solved CoM differ). ``stats`` (if given) gets the last IK's figures, the
-    IK time of all passes and the CoM error of the last re-solve."""
+    IK time of all passes, the CoM error of the last re-solve and ``plan``: the plan tracked
+    (``plan_fn``'s whole output, e.g. with the ZMP series for the plots)."""
     if passes < 1:
         raise ValueError("feasible_reference: passes must be >= 1")
     ik = ReferenceIK(model, config)
     planned_on, seconds = ref, 0.0
     for _ in range(passes):
-        com_plan = plan_fn(planned_on)[0]
+        planned = plan_fn(planned_on)
+        com_plan = planned[0]
         out = build_reference(model, ik.solve(ref, com_plan), ref.fps)
         out.stance = ref.stance.copy()
         planned_on, seconds = out, seconds + ik.stats["seconds"]
-    out.com_plan = plan_fn(out)[0] if replan else com_plan
+    com_err = float(np.linalg.norm(out.com - com_plan, axis=1).max())
+    if replan:
+        planned = plan_fn(out)
+    out.com_plan = planned[0]
     if stats is not None:
-        stats.update(ik.stats, ik_seconds=seconds, com_err_max_m=float(np.linalg.norm(out.com - com_plan, axis=1).max()))
+        stats.update(ik.stats, ik_seconds=seconds, com_err_max_m=com_err, plan=planned)
     return out

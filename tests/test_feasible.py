@@ -82,6 +82,19 @@ def test_single_support_plan_moves_the_com_over_the_stance_foot(scene):
     assert (out.qpos[:, 7:] >= lo - 1e-6).all() and (out.qpos[:, 7:] <= hi + 1e-6).all()
 
 
+def test_second_pass_plans_on_the_resolved_reference(scene):
+    """passes=2: the plan is made again on the first re-solve (flat footsteps), the motion re-solved to it."""
+    T = 100
+    ref = _standing_reference(scene, T)
+    ref.stance[40:70, 0] = False
+    stats: dict = {}
+    out = feasible_reference(scene.model, ref, passes=2, stats=stats)
+    assert out.com_plan is stats["plan"][0] and np.linalg.norm(out.com - out.com_plan, axis=1).max() < 5e-3
+    assert not np.allclose(out.com_plan, plan_com(ref)[0], atol=1e-4)  # planned on the re-solved reference
+    with pytest.raises(ValueError):
+        feasible_reference(scene.model, ref, passes=0)
+
+
 def test_joint_limits_hold_when_the_plan_asks_too_much(scene):
     """A plan 80 cm in front of the feet is out of reach: the IK stays inside the joint limits, keeps
     the feet planted and gets the CoM as far forward as it can, without chattering."""
