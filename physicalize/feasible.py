@@ -215,8 +215,8 @@ class ReferenceIK:
             out[t, :, 4:] = d.xpos[self._link_ids]
         return out
 
-    def _step(self, tasks: list, stance_tasks: list) -> float:
-        """One QP step (in place); returns its largest joint displacement [rad] (0 if no solution)."""
+    def _step(self, tasks: list, stance_tasks: list) -> None:
+        """One QP step, in place (none if no QP solves, counted in ``stats['failed_steps']``)."""
         cfg, c = self.cfg, self.configuration
         limits = [self.config_limit, self.knee_limit, self.velocity_limit]
         try:
@@ -231,14 +231,13 @@ class ReferenceIK:
                 dq = mink.solve_ik(c, [*tasks, *stance_tasks], 1.0, "daqp", damping=cfg.damping, limits=limits, constraints=self.freeze or None)
             except mink.NoSolutionFound:
                 self._failed += 1
-                return 0.0
+                return
             finally:
                 for s in stance_tasks:
                     s.set_position_cost(cfg.swing_position_cost)
                     s.set_orientation_cost(cfg.swing_orientation_cost)
             self._relaxed += cfg.exact_stance
         c.integrate_inplace(dq, 1.0)
-        return float(np.abs(dq[6:NV_ROBOT]).max())
 
     def solve(self, ref: Reference, com_plan: np.ndarray) -> np.ndarray:
         """``(T, 36)`` robot ``qpos``: the reference re-solved so its CoM follows ``com_plan`` (T, 3)."""
@@ -283,6 +282,7 @@ class ReferenceIK:
         return out
 
     def _converged(self, stance_tasks: list) -> bool:
+        """The CoM and every planted foot within ``tolerance`` of their targets."""
         c, tol = self.configuration, self.cfg.tolerance
         return bool(np.linalg.norm(self.com.compute_error(c)) < tol and all(np.linalg.norm(s.compute_error(c)[:3]) < tol for s in stance_tasks))
 
