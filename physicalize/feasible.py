@@ -1,0 +1,331 @@
+"""Layer 1 of the teacher, second half: the whole-body reference re-solved by differential IK (mink)
+so that its centre of mass follows the dynamically feasible plan (:mod:`physicalize.plan`) while
+feet, hands and posture follow the retargeted motion.
+
+Per frame ``t`` (warm-started from frame ``t-1``'s solution, up to :attr:`FeasibleConfig.iterations`
+QP steps, one :func:`mink.solve_ik` each, in displacement units ``dt = 1``)::
+
+    min_dq   ||W_c (J_c dq + c(q) - c*_t)||^2                             (ComTask: the plan)
+           + sum_{swing feet, hands} ||W_b (J_b dq + e_b(q, X*_{b,t}))||^2 (FrameTask: reference poses)
+           + ||W_o (J_o dq + e_o)||^2   pelvis and torso orientation      (FrameTask, orientation only)
+           + ||W_p (dq - (q*_t - q))||^2                                  (PostureTask: reference joints)
+           + (lambda + mu) ||dq||^2,   mu = lm * sum_i ||W_i e_i||^2
+    s.t.     J_f dq = -e_f(q, F_{f,t})        every planted foot f        (equality: its footstep)
+             dq_i = 0                          every dof of a free object  (DofFreezingTask)
+             q_min <= q + dq <= q_max                                      (ConfigurationLimit)
+             q_knee + dq_knee >= min_knee                                  (MinimumJointLimit)
+             |q + dq - q_{t-1}| <= v_max / fps                             (per-frame joint speed)
+
+with ``q*_t`` the reference configuration and ``X*_{b,t}`` its link poses (forward kinematics of the
+reference), ``c*_t`` the planned CoM (its height is the reference's: the CoM's z cost is lower, so
+the IK may lower the CoM where the legs cannot reach). ``lambda`` is a plain LM damping (a step's
+joint motion has a cost: a nearly straight leg does not oscillate) and ``mu`` mink's error-scaled
+damping (an unreachable CoM target is approached in small steps, not by chattering between far
+configurations that miss the footstep constraint in the true kinematics). If the QP with the
+footstep equalities is infeasible at a step, that step is taken with the planted feet as
+high-cost tasks instead (counted in ``stats``).
+
+Foot targets (:func:`foot_targets`): during each stance run of the reference's support schedule the
+foot is pinned to one **footstep**: the reference's horizontal position and heading at the run's
+slowest frame, sole flat on the floor (``z = 0``; the whole-body controller also holds stance feet
+flat), over the run's **planted** frames (those where the reference foot is within
+:attr:`FeasibleConfig.footstep_tolerance` of the footstep: a low foot still sliding in to land or
+out to lift off is not pinned). Other frames follow the reference with an offset (position and
+rotation vector) blended linearly from the previous footstep's to the next one's, so a foot lifts
+off and lands on its footsteps without a jump.
+
+:func:`feasible_reference` chains plan -> IK -> :class:`~physicalize.reference.Reference` of the
+re-solved motion (the original stance schedule kept, ``com_plan`` set), optionally re-planning on
+the re-solved reference (its support polygons are then the footsteps actually kept).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import mink
+import mujoco
+import numpy as np
+from mink.limits.limit import Constraint
+from scipy.spatial.transform import Rotation
+
+from physicalize.plan import plan_com
+from physicalize.reference import Reference, build_reference
+from physicalize.wbc import FOOT_BODIES, HAND_BODIES, NV_ROBOT, sole_corners
+from retarget.ik import FrameVelocityLimit
+from retarget.ik_config import joint_velocity_limits
+
+NQ_ROBOT = 36
+
+
+@dataclass(frozen=True)
+class FeasibleConfig:
+    """Costs (mink units: weight per metre or radian of error) and solver settings of the re-solve."""
+
+    com_cost: tuple[float, float, float] = (300.0, 300.0, 100.0)  # x, y, z: the plan keeps the reference's height
+    stance_position_cost: float = 1000.0  # used only when the exact footstep constraint is infeasible
+    stance_orientation_cost: float = 300.0
+    swing_position_cost: float = 30.0
+    swing_orientation_cost: float = 3.0
+    hand_position_cost: float = 10.0
+    hand_orientation_cost: float = 0.5
+    pelvis_orientation_cost: float = 3.0
+    torso_orientation_cost: float = 3.0
+    posture_cost: float = 0.3
+    damping: float = 1.0  # per rad^2 of step: keeps a nearly straight leg from oscillating
+    task_lm_damping: float = 1.0  # mink's error-scaled damping (mu = lm ||W e||^2): small steps toward unreachable targets
+    iterations: int = 3  # at most this many QP steps per frame ...
+    tolerance: float = 2e-4  # ... stopping once every planted foot and the CoM are this close to their targets [m]
+    init_iterations: int = 30  # first frame (no speed limit)
+    velocity_limit_factor: float = 1.0  # of the rated motor speeds
+    exact_stance: bool = True  # stance feet as equality constraints (else high-cost tasks)
+    min_knee: float = 0.1  # rad: the re-solved knees bend at least this much (no straight-leg singularity)
+    footstep_tolerance: float = 0.02  # m: a stance frame's reference foot this close to its footstep is planted
+
+
+class MinimumJointLimit(mink.Limit):
+    r"""``q_i + dq_i >= q_min,i`` for a few hinge joints (a lower bound inside the joint range), as
+    ``-dq_i <= max(q_i - q_min,i, 0)`` so ``dq = 0`` stays feasible from a start below the bound.
+
+    Used on the knees: a straight leg is a kinematic singularity where the linearised footstep
+    constraint is met by large, oscillating steps that miss it by centimetres in the true kinematics.
+    """
+
+    def __init__(self, model: mujoco.MjModel, minimum: dict[str, float]):
+        joints = [model.joint(name).id for name in minimum]
+        self._qadr = model.jnt_qposadr[joints]
+        self._lower = np.array(list(minimum.values()))
+        self._G = np.zeros((len(joints), model.nv))
+        self._G[np.arange(len(joints)), model.jnt_dofadr[joints]] = -1.0
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> Constraint:
+        del dt
+        return Constraint(G=self._G, h=np.maximum(configuration.q[self._qadr] - self._lower, 0.0))
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``[(start, stop)]`` of the True runs of a 1-D boolean array."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+def _yaw_rotation(quat_wxyz: np.ndarray) -> Rotation:
+    w, x, y, z = quat_wxyz
+    return Rotation.from_euler("z", np.arctan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def _rot(quat_wxyz: np.ndarray) -> Rotation:
+    return Rotation.from_quat(np.asarray(quat_wxyz)[..., [1, 2, 3, 0]])
+
+
+def _wxyz(r: Rotation) -> np.ndarray:
+    return r.as_quat()[..., [3, 0, 1, 2]]
+
+
+@dataclass
+class FootTargets:
+    """Per-frame foot body targets and where they are footsteps (``planted``: the IK holds them exactly)."""
+
+    pos: np.ndarray  # (T, 2, 3)
+    quat: np.ndarray  # (T, 2, 4) wxyz
+    planted: np.ndarray  # (T, 2) bool, a subset of the reference's stance
+
+
+def foot_targets(ref: Reference, sole_z: np.ndarray, tolerance: float = 0.02) -> FootTargets:
+    """Footsteps in stance, the reference plus a blended footstep offset elsewhere (module docstring).
+
+    ``sole_z[k]``: the sole's height in foot ``k``'s body frame (negative), so a flat foot on the floor
+    has its origin at ``-sole_z``. A stance run's footstep holds over its **planted** frames: the
+    contiguous frames around the run's slowest one where the reference foot is within ``tolerance``
+    (horizontally) of the footstep. A stance run whose reference foot slides further (a low, fast
+    foot the schedule counts as support) is followed like a swing outside those frames.
+    """
+    T = ref.frames
+    pos, quat = ref.foot_pos.copy(), ref.foot_quat.copy()
+    planted = np.zeros((T, 2), bool)
+    dt = 1.0 / ref.fps
+    for k in range(2):
+        speed = np.linalg.norm(np.gradient(ref.foot_pos[:, k, :2], dt, axis=0), axis=-1) if T > 1 else np.zeros(T)
+        steps = []  # (first planted frame, stop, footstep position, footstep rotation)
+        for s, e in _runs(ref.stance[:, k]):
+            i = s + int(np.argmin(speed[s:e]))
+            p = np.array([ref.foot_pos[i, k, 0], ref.foot_pos[i, k, 1], -sole_z[k]])
+            near = np.linalg.norm(ref.foot_pos[s:e, k, :2] - p[:2], axis=1) <= tolerance
+            a = i
+            while a > s and near[a - 1 - s]:
+                a -= 1
+            b = i + 1
+            while b < e and near[b - s]:
+                b += 1
+            r = _yaw_rotation(ref.foot_quat[i, k])
+            pos[a:b, k], quat[a:b, k], planted[a:b, k] = p, _wxyz(r), True
+            steps.append((a, b, p, r))
+        ref_rot = _rot(ref.foot_quat[:, k])
+        for before, after in zip([None, *steps], [*steps, None]):
+            a0, a1 = (before[1] if before else 0), (after[0] if after else T)
+            if a1 <= a0 or (before is None and after is None):
+                continue
+            frames = np.arange(a0, a1)
+            # footstep offsets at the last planted frame before and the first planted frame after
+            d0 = (before[2] - ref.foot_pos[a0 - 1, k], (before[3] * ref_rot[a0 - 1].inv()).as_rotvec()) if before else None
+            d1 = (after[2] - ref.foot_pos[a1, k], (after[3] * ref_rot[a1].inv()).as_rotvec()) if after else None
+            d0, d1 = d0 or d1, d1 or d0
+            alpha = ((frames - (a0 - 1)) / (a1 - a0 + 1))[:, None]  # 0 at the last planted frame, 1 at the next
+            pos[frames, k] = ref.foot_pos[frames, k] + (1 - alpha) * d0[0] + alpha * d1[0]
+            quat[frames, k] = _wxyz(Rotation.from_rotvec((1 - alpha) * d0[1] + alpha * d1[1]) * ref_rot[frames])
+    return FootTargets(pos, quat, planted)
+
+
+class ReferenceIK:
+    """The differential IK of the module docstring on a compiled scene (robot = the model's first tree,
+    ``qpos[:36]``; any further dofs, free objects, are frozen). Reusable across clips of one model."""
+
+    def __init__(self, model: mujoco.MjModel, config: FeasibleConfig = FeasibleConfig()):
+        if model.body(1).name != "pelvis":
+            raise ValueError("ReferenceIK: the robot (pelvis) must be the model's first body (mink's ComTask uses body 1)")
+        self.model, self.cfg = model, config
+        cfg = config
+        self.configuration = mink.Configuration(model)
+        self.sole_z = np.array([sole_corners(model, b)[0, 2] for b in FOOT_BODIES])
+        lm = cfg.task_lm_damping
+        self.feet = [mink.FrameTask(b, "body", cfg.swing_position_cost, cfg.swing_orientation_cost, lm_damping=lm) for b in FOOT_BODIES]
+        self.hands = [mink.FrameTask(b, "body", cfg.hand_position_cost, cfg.hand_orientation_cost, lm_damping=lm) for b in HAND_BODIES]
+        self.pelvis = mink.FrameTask("pelvis", "body", 0.0, cfg.pelvis_orientation_cost, lm_damping=lm)
+        self.torso = mink.FrameTask("torso_link", "body", 0.0, cfg.torso_orientation_cost, lm_damping=lm)
+        self.com = mink.ComTask(cost=cfg.com_cost, lm_damping=lm)
+        self.posture = mink.PostureTask(model, cost=cfg.posture_cost)
+        self.config_limit = mink.ConfigurationLimit(model)
+        self.knee_limit = MinimumJointLimit(model, {"left_knee_joint": cfg.min_knee, "right_knee_joint": cfg.min_knee})
+        self.velocity_limit = FrameVelocityLimit(model, joint_velocity_limits(cfg.velocity_limit_factor), dt=1.0 / 50.0)
+        self.freeze = [mink.DofFreezingTask(model, list(range(NV_ROBOT, model.nv)))] if model.nv > NV_ROBOT else []
+        self._link_ids = [model.body(b).id for b in (*HAND_BODIES, "pelvis", "torso_link")]
+        self.stats: dict[str, float] = {}
+
+    def _reference_poses(self, qpos: np.ndarray) -> np.ndarray:
+        """(T, 4, 7) wxyz_xyz poses of the hands, pelvis and torso of the reference ``qpos`` (T, 36)."""
+        d = mujoco.MjData(self.model)
+        d.qpos[:] = self.model.qpos0
+        out = np.zeros((len(qpos), len(self._link_ids), 7))
+        for t, q in enumerate(qpos):
+            d.qpos[:NQ_ROBOT] = q
+            mujoco.mj_kinematics(self.model, d)
+            out[t, :, :4] = d.xquat[self._link_ids]
+            out[t, :, 4:] = d.xpos[self._link_ids]
+        return out
+
+    def _step(self, tasks: list, stance_tasks: list) -> None:
+        """One QP step, in place (none if no QP solves, counted in ``stats['failed_steps']``)."""
+        cfg, c = self.cfg, self.configuration
+        limits = [self.config_limit, self.knee_limit, self.velocity_limit]
+        try:
+            if not cfg.exact_stance:
+                raise mink.NoSolutionFound("daqp")
+            dq = mink.solve_ik(c, tasks, 1.0, "daqp", damping=cfg.damping, limits=limits, constraints=[*stance_tasks, *self.freeze] or None)
+        except mink.NoSolutionFound:
+            for s in stance_tasks:
+                s.set_position_cost(cfg.stance_position_cost)
+                s.set_orientation_cost(cfg.stance_orientation_cost)
+            try:
+                dq = mink.solve_ik(c, [*tasks, *stance_tasks], 1.0, "daqp", damping=cfg.damping, limits=limits, constraints=self.freeze or None)
+            except mink.NoSolutionFound:
+                self._failed += 1
+                return
+            finally:
+                for s in stance_tasks:
+                    s.set_position_cost(cfg.swing_position_cost)
+                    s.set_orientation_cost(cfg.swing_orientation_cost)
+            self._relaxed += cfg.exact_stance
+        c.integrate_inplace(dq, 1.0)
+
+    def solve(self, ref: Reference, com_plan: np.ndarray) -> np.ndarray:
+        """``(T, 36)`` robot ``qpos``: the reference re-solved so its CoM follows ``com_plan`` (T, 3)."""
+        cfg, m, c = self.cfg, self.model, self.configuration
+        T = ref.frames
+        t0 = time.perf_counter()
+        feet = self.foot_targets = foot_targets(ref, self.sole_z, cfg.footstep_tolerance)
+        links = self._reference_poses(ref.qpos)
+        lo, hi = m.jnt_range[1:, 0], m.jnt_range[1:, 1]
+        hinge = np.array([int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_HINGE) and m.jnt_limited[j] for j in range(1, m.njnt)])
+        q = m.qpos0.copy()
+        q[:NQ_ROBOT] = ref.qpos[0]
+        adr = m.jnt_qposadr[1:][hinge]
+        q[adr] = np.clip(q[adr], lo[hinge], hi[hinge])  # the IK starts inside the limits
+        c.update(q)
+        self.velocity_limit.dt = 1.0 / ref.fps
+        self._relaxed = self._failed = 0
+        out = np.empty((T, NQ_ROBOT))
+        target_q = q.copy()
+        for t in range(T):
+            target_q[:NQ_ROBOT] = ref.qpos[t]
+            self.posture.set_target(target_q)
+            self.com.set_target(com_plan[t])
+            for task, pose in zip((*self.hands, self.pelvis, self.torso), links[t]):
+                task.set_target(mink.SE3(wxyz_xyz=pose))
+            tasks, stance = [self.com, *self.hands, self.pelvis, self.torso, self.posture], []
+            for k, task in enumerate(self.feet):
+                task.set_target(mink.SE3(wxyz_xyz=np.concatenate([feet.quat[t, k], feet.pos[t, k]])))
+                (stance if feet.planted[t, k] else tasks).append(task)
+            if t == 0:
+                for _ in range(cfg.init_iterations):
+                    self._step_free(tasks, stance)
+            else:
+                self.velocity_limit.start_frame(c.q)
+                for _ in range(cfg.iterations):
+                    self._step(tasks, stance)
+                    if self._converged(stance):
+                        break
+            out[t] = c.q[:NQ_ROBOT]
+        dt = time.perf_counter() - t0
+        self.stats = {"frames": T, "seconds": dt, "ms_per_frame": 1e3 * dt / max(T, 1), "relaxed_steps": self._relaxed, "failed_steps": self._failed}
+        return out
+
+    def _converged(self, stance_tasks: list) -> bool:
+        """The CoM and every planted foot within ``tolerance`` of their targets."""
+        c, tol = self.configuration, self.cfg.tolerance
+        return bool(np.linalg.norm(self.com.compute_error(c)) < tol and all(np.linalg.norm(s.compute_error(c)[:3]) < tol for s in stance_tasks))
+
+    def _step_free(self, tasks: list, stance_tasks: list) -> None:
+        """A first-frame step: no speed limit."""
+        saved = self.velocity_limit.dt
+        self.velocity_limit.dt = 1e6
+        self.velocity_limit.start_frame(self.configuration.q)
+        try:
+            self._step(tasks, stance_tasks)
+        finally:
+            self.velocity_limit.dt = saved
+
+
+def resolve_reference(model: mujoco.MjModel, ref: Reference, com_plan: np.ndarray, config: FeasibleConfig = FeasibleConfig()) -> np.ndarray:
+    """``(T, 36)`` qpos: ``ref`` re-solved by :class:`ReferenceIK` so its CoM follows ``com_plan``."""
+    return ReferenceIK(model, config).solve(ref, com_plan)
+
+
+def feasible_reference(model: mujoco.MjModel, ref: Reference, plan_fn: Callable = plan_com, *, passes: int = 1, replan: bool = False,
+                       config: FeasibleConfig = FeasibleConfig(), stats: dict | None = None) -> Reference:  # fmt: skip
+    """The reference to track: plan the CoM on ``ref`` (``plan_fn(ref)[0]``), re-solve the whole body
+    to it, and build the :class:`Reference` of the re-solved motion with ``ref``'s stance schedule and
+    ``com_plan`` set. With ``passes`` > 1, each further pass plans on the previous pass's re-solved
+    reference (its support polygons are the footsteps the IK kept) and re-solves ``ref``'s motion to
+    that plan; ``replan`` plans once more on the final re-solved reference without re-solving (then
+    ``com_plan`` and the re-solved CoM differ). ``stats`` (if given) gets the last IK's figures, the
+    IK time of all passes, the CoM error of the last re-solve and ``plan``: the plan tracked
+    (``plan_fn``'s whole output, e.g. with the ZMP series for the plots)."""
+    if passes < 1:
+        raise ValueError("feasible_reference: passes must be >= 1")
+    ik = ReferenceIK(model, config)
+    planned_on, seconds = ref, 0.0
+    for _ in range(passes):
+        planned = plan_fn(planned_on)
+        com_plan = planned[0]
+        out = build_reference(model, ik.solve(ref, com_plan), ref.fps)
+        out.stance = ref.stance.copy()
+        planned_on, seconds = out, seconds + ik.stats["seconds"]
+    com_err = float(np.linalg.norm(out.com - com_plan, axis=1).max())
+    if replan:
+        planned = plan_fn(out)
+    out.com_plan = planned[0]
+    if stats is not None:
+        stats.update(ik.stats, ik_seconds=seconds, com_err_max_m=com_err, plan=planned)
+    return out
