@@ -1,5 +1,6 @@
-"""Physicalize validity and speed per clip, with the raw retargeted reference vs the feasible (ZMP
-preview-planned) reference, side by side.
+"""Physicalize validity and speed per clip, side by side for the three references the base teacher
+can track: ``raw`` (the retargeted motion), ``planned`` (its posture with the ZMP preview-planned
+CoM) and ``feasible`` (the whole body re-solved by IK onto the plan: the stage's default).
 
 Run: ``make bench-physicalize``. Clips: the four embedded default clips and, when ``../shared/mocap``
 is present, the OMOMO box clip, the InterMimic table clip and the PyMO walk. Each clip is first
@@ -17,7 +18,7 @@ import torch
 
 torch.set_num_threads(1)
 
-from physicalize.stage import physicalize_clip  # noqa: E402
+from physicalize.stage import REFERENCES, physicalize_clip  # noqa: E402
 from pipeline.default_input import default_clips  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
 from retarget.stage import retarget_clip  # noqa: E402
@@ -51,12 +52,11 @@ def _cell(key, f) -> str:
 
 def main() -> None:
     print(f"{'clip':24s}{'reference':11s}" + "".join(f"{h:>10s}" for _, h in COLUMNS) + "  reason")
-    valid = {"raw": [], "feasible": []}
+    valid = {k: [] for k in REFERENCES}
     for name, human in _clips():
         robot, _, _ = retarget_clip(human)
-        for plan in (False, True):
-            _, _, f, _ = physicalize_clip(robot, plan=plan)
-            kind = "feasible" if plan else "raw"
+        for kind in REFERENCES:
+            _, _, f, _ = physicalize_clip(robot, reference=kind)
             valid[kind].append(f["valid"])
             print(f"{name:24s}{kind:11s}" + "".join(f"{_cell(k, f):>10s}" for k, _ in COLUMNS) + f"  {f['reason'][:60]}", flush=True)
     for kind, v in valid.items():

@@ -2,7 +2,8 @@
 (LeRobot) + ``report.json``, and per clip an MCAP log and a PNG plot in ``logs/physicalized/``.
 
 Per clip: build the scene (robot + objects as free bodies moved only by contact), the tracking
-reference (:mod:`physicalize.reference`), the feasible CoM plan (:mod:`physicalize.plan`), track it
+reference (:mod:`physicalize.reference`), the feasible CoM plan (:mod:`physicalize.plan`) with the
+whole body re-solved onto it (:mod:`physicalize.feasible`), track it
 closed loop with the teacher (``base``: :class:`physicalize.wbc.WholeBodyController`), record the
 state-action trajectory (:mod:`physicalize.rollout`), replay the actions open loop to check
 self-consistency, and measure the validity figures (:mod:`physicalize.validate`). Invalid clips stay
@@ -50,8 +51,14 @@ def _scene_for(clip: RobotClip, profile: str):
     return build_scene([SceneObject(o.name, o.geometry, ObjectPhysics(mass=o.mass or 2.0), pose=tuple(o.pose[0])) for o in clip.objects], profile)
 
 
-def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", plan: bool = True, perturb=None) -> tuple[RobotClip | None, Rollout, dict, dict]:
-    """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip."""
+REFERENCES = ("raw", "planned", "feasible")
+
+
+def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str = "feasible", perturb=None) -> tuple[RobotClip | None, Rollout, dict, dict]:
+    """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip, tracking the
+    ``reference``: ``raw`` (the retargeted motion and its kinematic CoM), ``planned`` (its posture
+    with the ZMP-planned CoM) or ``feasible`` (the whole body re-solved by IK onto the plan)."""
+    from physicalize.feasible import feasible_reference
     from physicalize.plan import plan_com
     from physicalize.reference import build_reference
     from physicalize.rollout import initial_state, replay, simulate
@@ -61,9 +68,15 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", plan: bool = Tr
     t0 = time.perf_counter()
     scene = _scene_for(clip, profile)
     ref = build_reference(scene.model, clip.qpos, clip.fps)
+    if reference not in REFERENCES:
+        raise ValueError(f"unknown reference {reference!r}; known: {', '.join(REFERENCES)}")
     zmp = None
-    if plan:
+    if reference == "planned":
         ref.com_plan, _, zmp = plan_com(ref)
+    elif reference == "feasible":
+        stats: dict = {}
+        ref = feasible_reference(scene.model, ref, plan_com, stats=stats)
+        zmp = stats["plan"][2]
     objects = {o.name: o.pose for o in clip.objects}
     qpos0, qvel0 = initial_state(scene, ref, objects)
     roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile), qpos0, qvel0, contact_links=clip.contact_links, perturb=perturb)
@@ -80,9 +93,9 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", plan: bool = Tr
     robot = RobotClip(
         roll.qpos[:, :36], clip.fps, clip.source, objects=sim_objects, contact_links=clip.contact_links,
         contacts=roll.contact if clip.contact_links else None, method="lessmimic-wbc", task=clip.task,
-        provenance={**clip.provenance, "teacher": "base", "actuator_profile": profile, "reference": "feasible" if plan else "raw"},
+        provenance={**clip.provenance, "teacher": "base", "actuator_profile": profile, "reference": reference},
     )  # fmt: skip
-    com = {"reference": ref.com[:T], "planned": (ref.com_plan if plan else ref.com)[:T], "zmp_planned": None if zmp is None else zmp[:T],
+    com = {"reference": ref.com[:T], "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T], "zmp_planned": None if zmp is None else zmp[:T],
            "simulated": _sim_com(scene.model, roll.qpos), "pelvis_ref": clip.qpos[:T, 2], "pelvis_sim": roll.qpos[:, 2]}  # fmt: skip
     return robot, roll, figures, com
 
@@ -125,8 +138,9 @@ def _run_one(index: int, clip: RobotClip, work: Path, teacher: str, profile: str
 
 CARD_NOTES = [
     "Each episode is a closed-loop MuJoCo simulation (200 Hz physics, 50 Hz control) of the G1 tracking a retargeted clip "
-    "with a training-free whole-body QP controller (the `base` teacher) on a dynamically feasible CoM plan (ZMP preview "
-    "control over the clip's foot support schedule). Objects are free bodies moved only by contact: no welds, no "
+    "with a training-free whole-body QP controller (the `base` teacher) on a dynamically feasible reference (a ZMP preview-"
+    "control CoM plan over the clip's foot support schedule, the whole body re-solved onto it by IK keeping the "
+    "footsteps, hands and posture). Objects are free bodies moved only by contact: no welds, no "
     "external or root assist forces.",
     "`action` is the 29 joint position targets the position actuators held from frame t to t+1 (actuator profile in the "
     "card header); `observation.torque` the actuator torques applied (mean over the 4 physics steps of the hold).",
