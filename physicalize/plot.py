@@ -1,7 +1,8 @@
 """Per-clip inspection plot (PNG) of a physicalized clip.
 
 Four panels over time: (1) CoM x and y of the retargeted reference, the feasible plan and the
-simulation, with the plan's ZMP; (2) pelvis height, reference vs simulated; (3) vertical floor
+simulation, with the plan's ZMP and the support region's x/y bounds (shaded: the stance feet's sole
+corners); (2) pelvis height, reference vs simulated; (3) vertical floor
 force on each foot; (4) object heights, reference vs simulated (when the clip has objects).
 """
 
@@ -28,6 +29,9 @@ def plot_physicalized(com: dict, foot_force: np.ndarray, objects: dict[str, tupl
         axes[0].plot(t, com["reference"][:, k], color="tab:gray", ls=ls, label=f"reference CoM {axis}")
         axes[0].plot(t, com["planned"][:, k], color="tab:blue", ls=ls, label=f"planned CoM {axis}")
         axes[0].plot(t, com["simulated"][:, k], color="tab:orange", ls=ls, label=f"simulated CoM {axis}")
+        if com.get("support") is not None:
+            axes[0].fill_between(t, com["support"][:, 0, k], com["support"][:, 1, k], color="tab:green", alpha=0.12, lw=0,
+                                 label=f"support region {axis}")  # fmt: skip
         if com.get("zmp_planned") is not None:
             axes[0].plot(t, com["zmp_planned"][:, k], color="tab:green", ls=ls, lw=0.8, label=f"planned ZMP {axis}")
     axes[1].plot(t, com["pelvis_ref"], color="tab:gray", label="reference pelvis z")

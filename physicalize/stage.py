@@ -96,8 +96,15 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
         provenance={**clip.provenance, "teacher": "base", "actuator_profile": profile, "reference": reference},
     )  # fmt: skip
     com = {"reference": ref.com[:T], "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T], "zmp_planned": None if zmp is None else zmp[:T],
-           "simulated": _sim_com(scene.model, roll.qpos), "pelvis_ref": clip.qpos[:T, 2], "pelvis_sim": roll.qpos[:, 2]}  # fmt: skip
+           "simulated": _sim_com(scene.model, roll.qpos), "pelvis_ref": clip.qpos[:T, 2], "pelvis_sim": roll.qpos[:, 2],
+           "support": _support_box(ref)[:T]}  # fmt: skip
     return robot, roll, figures, com
+
+
+def _support_box(ref) -> np.ndarray:
+    """(T, 2, 2) per frame the [min, max] x and y of the stance feet's sole corners (the support region's bounds)."""
+    corners = np.where(ref.stance[:, :, None, None], ref.corners[..., :2], np.nan).reshape(ref.frames, -1, 2)
+    return np.stack([np.nanmin(corners, axis=1), np.nanmax(corners, axis=1)], axis=1)
 
 
 def _sim_com(model, qpos: np.ndarray) -> np.ndarray:
