@@ -12,8 +12,8 @@ over the frame tasks ``b`` (one per target body, costs from the target weights),
 an object by an unreachable target), subject to
 
 * joint limits (:class:`mink.ConfigurationLimit`);
-* a per-frame joint speed limit (:class:`FrameVelocityLimit`):
-  ``|q_t - q_{t-1}| <= v_max dt``;
+* a per-frame joint and root speed limit (:class:`FrameVelocityLimit`):
+  ``|q_t - q_{t-1}| <= v_max dt`` (root position: ``IKConfig.root_speed_limit`` per axis);
 * collision avoidance with the scene's own geoms: robot vs the floor plane
   (:class:`~retarget.ik_config.FloorLimit`), robot vs every object geom and robot self-collision
   (:class:`~retarget.ik_config.SeparationLimit`, the pairs MuJoCo's physics checks).
@@ -25,7 +25,8 @@ there stays at its scene pose). The QP has the robot's 35 DoFs only.
 Feet: while ``IKTargets.foot_contact`` is set, the foot's ``ankle_roll_link`` is pinned by a
 high-cost frame task (replacing its target) to ``(x0, y0, h_sole)`` with zero roll and pitch and
 heading ``yaw0``, where ``(x0, y0, yaw0)`` are the foot target's at contact onset and ``h_sole``
-is derived from the foot collision capsules (:func:`~retarget.ik_config.sole_offset`).
+is derived from the foot collision capsules (:func:`~retarget.ik_config.sole_offset`); the pin's
+orientation turns there from the foot's at onset over ``IKConfig.pin_ramp_s``.
 
 Objects: while ``IKTargets.object_contact`` flags a link (the human touches an object with a
 joint mapped to it), a :class:`~retarget.contact.ContactTask` drives the link's distance to the
@@ -66,24 +67,36 @@ from retarget.targets import IKTargets
 
 
 class FrameVelocityLimit(mink.VelocityLimit):
-    r"""Joint speed limit over a whole frame, however many QP steps it takes.
+    r"""Joint and root speed limit over a whole frame, however many QP steps it takes.
 
     With ``q_0`` the configuration at the frame's start (:meth:`start_frame`) and ``dt`` the
     frame period, each step ``dq`` at ``q`` satisfies, for every limited hinge DoF ``i``,
 
     ``-v_i dt - (q_i - q_{0,i}) <= dq_i <= v_i dt - (q_i - q_{0,i})``
 
-    so ``|q_t - q_{t-1}| <= v dt``. (mink's :class:`~mink.VelocityLimit` bounds each step by
-    ``v dt``, allowing ``n v dt`` in ``n`` steps.) Bounds are floored at zero so ``dq = 0``
-    stays feasible. Free joints are not limited.
+    so ``|q_t - q_{t-1}| <= v dt``; with ``root_speed`` the same holds per axis for the free
+    joint's position (its linear velocity DoFs integrate into its position unrotated), so the
+    root cannot jump to satisfy what speed-limited joints could not (unlimited, a retargeted BVH
+    walk had 15 cm root jumps in one frame when a foot pin engaged). (mink's
+    :class:`~mink.VelocityLimit` bounds each step by ``v dt``, allowing ``n v dt`` in ``n`` steps.)
+    Bounds are floored at zero so ``dq = 0`` stays feasible.
     """
 
-    def __init__(self, model: mujoco.MjModel, velocities: dict[str, float], dt: float):
+    def __init__(self, model: mujoco.MjModel, velocities: dict[str, float], dt: float, root_speed: float | None = None):
         super().__init__(model, velocities=velocities)
         self.dt = float(dt)
-        self._qadr = model.jnt_qposadr[model.dof_jntid[self.indices]]
-        self._G = np.vstack([self.projection_matrix, -self.projection_matrix])
-        self._anchor = np.zeros(len(self.indices))
+        idx, qadr, limit = list(self.indices), list(model.jnt_qposadr[model.dof_jntid[self.indices]]), list(self.limit)
+        if root_speed is not None:
+            free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE and model.jnt_bodyid[j] == 1]
+            if not free:
+                raise ValueError("FrameVelocityLimit: root_speed given but the model's first body has no free joint")
+            d0, a0 = model.jnt_dofadr[free[0]], model.jnt_qposadr[free[0]]
+            idx, qadr, limit = [d0, d0 + 1, d0 + 2, *idx], [a0, a0 + 1, a0 + 2, *qadr], [root_speed] * 3 + limit
+        self._qadr, self._limit = np.array(qadr), np.array(limit, dtype=float)
+        P = np.zeros((len(idx), model.nv))
+        P[np.arange(len(idx)), idx] = 1.0
+        self._G = np.vstack([P, -P])
+        self._anchor = np.zeros(len(idx))
 
     def start_frame(self, q: np.ndarray) -> None:
         self._anchor = q[self._qadr].copy()
@@ -91,7 +104,7 @@ class FrameVelocityLimit(mink.VelocityLimit):
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> Constraint:
         del dt
         moved = configuration.q[self._qadr] - self._anchor
-        budget = self.limit * self.dt
+        budget = self._limit * self.dt
         return Constraint(G=self._G, h=np.maximum(np.concatenate([budget - moved, budget + moved]), 0.0))
 
 
@@ -119,7 +132,7 @@ class G1Retargeter:
         self.posture.set_target(self.q_default)
         self.pin_tasks = {b: mink.FrameTask(b, "body", cfg.foot_pin_position_cost, cfg.foot_pin_orientation_cost) for b in FOOT_BODIES}
         self.config_limit = mink.ConfigurationLimit(m, gain=cfg.configuration_limit_gain)
-        self.velocity_limit = FrameVelocityLimit(m, joint_velocity_limits(cfg.velocity_limit_factor), dt=1.0 / 30.0)
+        self.velocity_limit = FrameVelocityLimit(m, joint_velocity_limits(cfg.velocity_limit_factor), dt=1.0 / 30.0, root_speed=cfg.root_speed_limit)
         self._robot_geoms = robot_collision_geoms(m)
         self._object_geoms = object_collision_geoms(m, scene)
         self.collision_limits = self._collision_limits()
@@ -195,7 +208,10 @@ class G1Retargeter:
                      pins: list, feet_idx: list) -> list:  # fmt: skip
         """Frame ``t``'s tasks: body targets, a pin replacing the target of each foot in contact, the posture.
 
-        ``pins`` (per foot, updated in place) holds the pinned pose from the contact's onset frame.
+        ``pins`` (per foot, updated in place) holds the contact's onset frame, the pinned position with
+        the foot's orientation there, and the pinned pose; the pin's orientation turns from the first
+        to the second over ``pin_ramp_s`` (a heel strike's pitched foot levelled in one frame made
+        the root jump 15 cm).
         """
         for k, task in enumerate(tasks):
             task.set_target(mink.SE3(wxyz_xyz=poses[k]))
@@ -205,8 +221,12 @@ class G1Retargeter:
                 pins[s] = None
                 continue
             if pins[s] is None:
-                pins[s] = self._pin_pose(targets, t, body, feet_idx[s])
-            self.pin_tasks[body].set_target(mink.SE3(wxyz_xyz=pins[s]))
+                pin = self._pin_pose(targets, t, body, feet_idx[s])
+                onset = self.configuration.get_transform_frame_to_world(body, "body").wxyz_xyz
+                pins[s] = (t, mink.SE3(wxyz_xyz=np.concatenate([onset[:4], pin[4:]])), mink.SE3(wxyz_xyz=pin))
+            t0, onset, pin = pins[s]
+            ramp = max(int(round(self.config.pin_ramp_s * targets.fps)), 1)
+            self.pin_tasks[body].set_target(onset.interpolate(pin, min((t - t0 + 1) / ramp, 1.0)))
             if feet_idx[s] is not None:
                 active.remove(tasks[feet_idx[s]])
             active.append(self.pin_tasks[body])

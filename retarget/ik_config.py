@@ -51,6 +51,7 @@ class IKConfig:
     ``min_dq  sum_i ||W_i (J_i dq + e_i)||^2 + (damping + mu) ||dq||^2``
     ``s.t.    q_min <= q + dq <= q_max  (gain configuration_limit_gain),``
     ``        |q + dq - q_{t-1}| <= velocity_limit_factor * motor speed * dt,``
+    ``        |p + dp - p_{t-1}| <= root_speed_limit * dt  (root position, per axis),``
     ``        d_k + n_k^T J_k dq >= d_min,k - (1 - collision_gain) (d_min,k - d_k)``
     ``        for every geom pair k closer than detection_distance,``
 
@@ -85,6 +86,7 @@ class IKConfig:
     task_lm_damping: float = 1.0
     posture_cost: float = 0.01
     velocity_limit_factor: float = 0.5
+    root_speed_limit: float = 3.0
     configuration_limit_gain: float = 0.95
     self_collision: bool = True
     self_min_distance: float = 0.005
@@ -96,6 +98,7 @@ class IKConfig:
     foot_pin_position_cost: float = 30.0
     foot_pin_orientation_cost: float = 10.0
     pin_anchor: str = "target"
+    pin_ramp_s: float = 0.1
     contact_cost: float = 5.0
     contact_gap: float = 0.01
     contact_reach: float = 0.3
@@ -106,6 +109,8 @@ class IKConfig:
     def __post_init__(self):
         if self.iterations < 1 or self.init_iterations < 1:
             raise ValueError(f"IKConfig: iterations ({self.iterations}) and init_iterations ({self.init_iterations}) must be >= 1")
+        if not 0.0 < self.root_speed_limit:
+            raise ValueError(f"IKConfig: root_speed_limit must be > 0, got {self.root_speed_limit}")
         if not 0.0 < self.velocity_limit_factor:
             raise ValueError(f"IKConfig: velocity_limit_factor must be > 0, got {self.velocity_limit_factor}")
         if not 0.0 < self.collision_gain <= 1.0:
