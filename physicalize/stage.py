@@ -247,6 +247,13 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
         prof = actuator_profile(profile)
     except ValueError as exc:
         raise InputError(profile, "--profile", str(exc)) from None
+    if spec.checkpoint is not None:
+        try:
+            trained_for = _load_residual(str(spec.checkpoint), spec.digest).cfg.profile
+        except Exception as exc:  # noqa: BLE001 - any unreadable checkpoint is a one-line input error
+            raise InputError(spec.checkpoint, "--teacher", f"unreadable residual checkpoint: {type(exc).__name__}: {exc}") from None
+        if trained_for != prof.name:
+            raise InputError(spec.checkpoint, "--teacher", f"residual trained for actuator profile {trained_for!r}, this run uses {prof.name!r}")
     src, out = stage_dir(name, "retargeted"), stage_dir(name, "physicalized")
     if not (src / "meta" / "info.json").is_file():
         raise InputError(src, "meta/info.json", "no retargeted dataset here: run `lessmimic retarget --name NAME` first")

@@ -134,6 +134,13 @@ def test_stage_with_the_residual_teacher(tmp_path, monkeypatch, checkpoint, caps
     assert main(["physicalize", "--name", "stand", "--teacher", f"base+residual:{tmp_path / 'missing.pt'}"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and "unknown teacher" in err[0] and "missing.pt" in err[1] and "not found" in err[1]
+    assert main(["physicalize", "--name", "stand", "--teacher", teacher, "--profile", "lessmimic_demo"]) == 2
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a checkpoint")
+    assert main(["physicalize", "--name", "stand", "--teacher", f"base+residual:{junk}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "trained for actuator profile 'mjlab'" in err[0] and "unreadable residual checkpoint" in err[1]
+    assert not stage_dir("stand", "physicalized").exists()
     assert main(["physicalize", "--name", "stand", "--teacher", teacher]) == 0
     root = stage_dir("stand", "physicalized")
     report = json.loads((root / "report.json").read_text())
