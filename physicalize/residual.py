@@ -269,8 +269,8 @@ def train_residual(clip: RobotClip, iterations: int, num_envs: int, seed: int, o
             runner.learn(1)
             ended = env.episodes[n_ep:]
             row = {"iteration": it, "reward_per_step": (env.reward_sum - rsum) / max(env.steps - steps, 1), "episodes": len(ended),
-                   "mean_episode_frames": float(np.mean([e[1] for e in ended])) if ended else float("nan"),
-                   "fall_frac": float(np.mean([e[2] for e in ended])) if ended else float("nan")}  # fmt: skip
+                   "mean_episode_frames": float(np.mean([e[1] for e in ended])) if ended else None,
+                   "fall_frac": float(np.mean([e[2] for e in ended])) if ended else None}  # fmt: skip
             history.append(row)
             if verbose:
                 print(" ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()), flush=True)

@@ -97,6 +97,14 @@ def test_smoke_training_writes_a_checkpoint_that_runs_in_simulate(checkpoint, pr
     assert observe(d, ref, 0, u, SMOKE).shape == (policy.obs_dim,)
 
 
+def test_training_is_deterministic_for_a_seed(checkpoint, tmp_path):
+    again = torch.load(train_residual(_standing_clip(), 2, 4, 0, tmp_path / "again.pt", config=SMOKE), weights_only=True)
+    first = torch.load(checkpoint, weights_only=True)
+    assert first["actor_state_dict"].keys() == again["actor_state_dict"].keys()
+    assert all(torch.equal(v, again["actor_state_dict"][k]) for k, v in first["actor_state_dict"].items())
+    assert first["training"]["history"] == again["training"]["history"]
+
+
 def test_the_checkpoint_and_the_config_round_trip(tmp_path):
     cfg = replace(SMOKE, lookahead=(1, 3), scale=0.02)
     assert ResidualConfig.from_dict({k: list(v) if isinstance(v, tuple) else v for k, v in cfg.__dict__.items()}) == cfg
