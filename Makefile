@@ -14,7 +14,7 @@ JOBS ?= 1
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install retarget physicalize features test test-fast bench bench-retarget bench-physicalize clean-venv
+.PHONY: install retarget physicalize train-residual features test test-fast bench bench-retarget bench-physicalize clean-venv
 
 install: $(VENV)/.installed
 
@@ -30,8 +30,18 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 retarget: install
 	$(CLI) retarget $(STAGE_ARGS) -j $(JOBS)
 
+TEACHER ?= base
 physicalize: install
-	$(CLI) physicalize $(STAGE_ARGS)
+	$(CLI) physicalize $(STAGE_ARGS) --teacher $(TEACHER)
+
+# Smoke scale (CPU, ~1-2 min): a residual on one retargeted clip; then `make physicalize TEACHER=base+residual:$(CKPT)`.
+EPISODE ?= 0
+ITERATIONS ?= 20
+ENVS ?= 8
+SEED ?= 0
+CKPT ?= datasets/$(NAME)/residual_ep$(EPISODE).pt
+train-residual: install
+	$(CLI) physicalize-residual --name $(NAME) --episode $(EPISODE) --iterations $(ITERATIONS) --envs $(ENVS) --seed $(SEED) --out $(CKPT)
 
 features: install
 	$(CLI) features $(STAGE_ARGS)

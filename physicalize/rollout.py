@@ -98,8 +98,10 @@ def _link_contacts(m, d, link_geoms: list[set[int]], object_geoms: set[int]) -> 
 
 def simulate(scene: Scene, ref: Reference, controller: WholeBodyController, qpos0: np.ndarray, qvel0: np.ndarray, *,
              contact_links: tuple[str, ...] = (), perturb: Callable[[int, mujoco.MjData], None] | None = None,
-             stop_on_fall: bool = True) -> Rollout:  # fmt: skip
-    """Track ``ref`` from ``(qpos0, qvel0)``; ``perturb(t, data)`` may set ``xfrc_applied`` (tests only)."""
+             stop_on_fall: bool = True, residual: Callable[[mujoco.MjData, Reference, int, np.ndarray], np.ndarray] | None = None) -> Rollout:  # fmt: skip
+    """Track ``ref`` from ``(qpos0, qvel0)``; ``perturb(t, data)`` may set ``xfrc_applied`` (tests only).
+    With a ``residual(data, ref, t, base_action)`` (:class:`physicalize.residual.ResidualPolicy`) the
+    applied (and recorded) targets are its output, else the controller's."""
     m = scene.model
     d = mujoco.MjData(m)
     d.qpos[:], d.qvel[:] = qpos0, qvel0
@@ -119,7 +121,8 @@ def simulate(scene: Scene, ref: Reference, controller: WholeBodyController, qpos
         rec["contact"].append(_link_contacts(m, d, link_geoms, object_geoms))
         sol = controller.solve(d, ref.target(t))
         fails += not sol.ok
-        d.ctrl[:] = sol.action
+        action = sol.action if residual is None else residual(d, ref, t, sol.action)
+        d.ctrl[:] = action
         tau, pen, ext = np.zeros(NUM_JOINTS), 0.0, 0.0
         for _ in range(SUBSTEPS):
             if perturb is not None:
@@ -129,7 +132,7 @@ def simulate(scene: Scene, ref: Reference, controller: WholeBodyController, qpos
             tau += d.actuator_force / SUBSTEPS
             if d.ncon:
                 pen = max(pen, float(-d.contact.dist[: d.ncon].min()))
-        rec["action"].append(sol.action)
+        rec["action"].append(action)
         rec["torque"].append(tau)
         rec["penetration"].append(max(pen, 0.0))
         rec["external_force"].append(ext)

@@ -28,8 +28,44 @@ from physicalize.rollout import Rollout
 from pipeline.clip import RobotClip
 from pipeline.errors import InputError
 
-TEACHERS = ("base",)
+TEACHERS = ("base", "base+residual:<checkpoint>")
 REPLAY_TOL_M = 1e-6
+
+
+@dataclass(frozen=True)
+class TeacherSpec:
+    """A parsed ``--teacher``: the base QP controller, optionally with a learned residual checkpoint
+    (``digest``: the checkpoint file's sha256, part of the cache key and the provenance)."""
+
+    name: str
+    checkpoint: Path | None = None
+    digest: str | None = None
+
+
+def parse_teacher(teacher: str) -> TeacherSpec:
+    """``base`` or ``base+residual:<checkpoint path>``; anything else, or a checkpoint that is not a
+    file, is an :class:`InputError` (one line naming the teacher or the path)."""
+    if teacher == "base":
+        return TeacherSpec("base")
+    prefix = "base+residual:"
+    if not teacher.startswith(prefix) or not teacher[len(prefix) :]:
+        raise InputError(teacher, "--teacher", f"unknown teacher; available: {', '.join(TEACHERS)}")
+    path = Path(teacher[len(prefix) :]).expanduser()
+    if not path.is_file():
+        raise InputError(path, "--teacher", "residual checkpoint not found (train one with `lessmimic physicalize-residual`)")
+    return TeacherSpec("base+residual", path, hashlib.sha256(path.read_bytes()).hexdigest())
+
+
+_RESIDUALS: dict = {}
+
+
+def _load_residual(path: str, digest: str):
+    """The checkpoint's policy, loaded once per (path, content)."""
+    if (path, digest) not in _RESIDUALS:
+        from physicalize.residual import ResidualPolicy
+
+        _RESIDUALS[(path, digest)] = ResidualPolicy.load(path)
+    return _RESIDUALS[(path, digest)]
 
 
 @dataclass(frozen=True)
@@ -54,22 +90,19 @@ def _scene_for(clip: RobotClip, profile: str):
 REFERENCES = ("raw", "planned", "feasible")
 
 
-def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str = "feasible", perturb=None) -> tuple[RobotClip | None, Rollout, dict, dict]:
-    """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip, tracking the
-    ``reference``: ``raw`` (the retargeted motion and its kinematic CoM), ``planned`` (its posture
-    with the ZMP-planned CoM) or ``feasible`` (the whole body re-solved by IK onto the plan)."""
+def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "feasible"):
+    """``(scene, tracked Reference, object tracks {name: (T, 7)}, planned ZMP or None)`` of one clip,
+    tracking the ``reference``: ``raw`` (the retargeted motion and its kinematic CoM), ``planned`` (its
+    posture with the ZMP-planned CoM) or ``feasible`` (the whole body re-solved by IK onto the plan).
+    Shared by :func:`physicalize_clip` and the residual's training (:mod:`physicalize.residual`)."""
     from physicalize.feasible import feasible_reference
     from physicalize.plan import plan_com
     from physicalize.reference import build_reference
-    from physicalize.rollout import initial_state, replay, simulate
-    from physicalize.validate import validate
-    from physicalize.wbc import WholeBodyController
 
-    t0 = time.perf_counter()
-    scene = _scene_for(clip, profile)
-    ref = build_reference(scene.model, clip.qpos, clip.fps)
     if reference not in REFERENCES:
         raise ValueError(f"unknown reference {reference!r}; known: {', '.join(REFERENCES)}")
+    scene = _scene_for(clip, profile)
+    ref = build_reference(scene.model, clip.qpos, clip.fps)
     zmp = None
     if reference == "planned":
         ref.com_plan, _, zmp = plan_com(ref)
@@ -77,9 +110,24 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
         stats: dict = {}
         ref = feasible_reference(scene.model, ref, plan_com, stats=stats)
         zmp = stats["plan"][2]
-    objects = {o.name: o.pose for o in clip.objects}
+    return scene, ref, {o.name: o.pose for o in clip.objects}, zmp
+
+
+def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str = "feasible", perturb=None,
+                     teacher: str = "base") -> tuple[RobotClip | None, Rollout, dict, dict]:  # fmt: skip
+    """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
+    ``reference`` (see :func:`tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`)."""
+    from physicalize.rollout import initial_state, replay, simulate
+    from physicalize.validate import validate
+    from physicalize.wbc import WholeBodyController
+
+    spec = parse_teacher(teacher)
+    residual = None if spec.checkpoint is None else _load_residual(str(spec.checkpoint), spec.digest)
+    t0 = time.perf_counter()
+    scene, ref, objects, zmp = tracking_problem(clip, profile, reference)
     qpos0, qvel0 = initial_state(scene, ref, objects)
-    roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile), qpos0, qvel0, contact_links=clip.contact_links, perturb=perturb)
+    roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile), qpos0, qvel0, contact_links=clip.contact_links, perturb=perturb,
+                    residual=residual)  # fmt: skip
     roll.seconds = time.perf_counter() - t0  # planning + tracking
     figures = validate(scene, roll, clip.qpos, objects)
     qs, _ = replay(scene.model, qpos0, qvel0, roll.action)
@@ -92,8 +140,8 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
                                 contact=None if o.contact is None else o.contact[:T]) for o in clip.objects)  # fmt: skip
     robot = RobotClip(
         roll.qpos[:, :36], clip.fps, clip.source, objects=sim_objects, contact_links=clip.contact_links,
-        contacts=roll.contact if clip.contact_links else None, method="lessmimic-wbc", task=clip.task,
-        provenance={**clip.provenance, "teacher": "base", "actuator_profile": profile, "reference": reference},
+        contacts=roll.contact if clip.contact_links else None, method="lessmimic-wbc" + ("+residual" if residual is not None else ""), task=clip.task,
+        provenance={**clip.provenance, "teacher": teacher, **({"teacher_sha256": spec.digest} if spec.digest else {}), "actuator_profile": profile, "reference": reference},
     )  # fmt: skip
     com = {"reference": ref.com[:T], "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T], "zmp_planned": None if zmp is None else zmp[:T],
            "simulated": _sim_com(scene.model, roll.qpos), "pelvis_ref": clip.qpos[:T, 2], "pelvis_sim": roll.qpos[:, 2],
@@ -124,7 +172,7 @@ def _cache_key(clip: RobotClip, index: int, teacher: str, profile: str) -> str:
     h = hashlib.sha256(np.ascontiguousarray(clip.qpos).tobytes())
     for o in clip.objects:
         h.update(np.ascontiguousarray(o.pose).tobytes())
-    h.update(f"{clip.source}|{index}|{teacher}|{profile}".encode())
+    h.update(f"{clip.source}|{index}|{teacher}|{parse_teacher(teacher).digest}|{profile}".encode())
     return h.hexdigest()[:16]
 
 
@@ -133,7 +181,7 @@ def _run_one(index: int, clip: RobotClip, work: Path, teacher: str, profile: str
     if cached.is_file():
         return pickle.loads(cached.read_bytes())
     try:
-        robot, roll, figures, com = physicalize_clip(clip, profile=profile)
+        robot, roll, figures, com = physicalize_clip(clip, profile=profile, teacher=teacher)
         result = ClipResult(index, clip.source, robot, roll, figures, com)
     except Exception as exc:  # noqa: BLE001 - a clip that cannot be simulated is reported, the batch goes on
         result = ClipResult(index, clip.source, None, None, {"valid": False, "reason": f"error: {type(exc).__name__}: {exc}"}, {})
@@ -201,12 +249,18 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
     from physicalize.plot import plot_physicalized
     from physicalize.validate import summarise
 
-    if teacher not in TEACHERS:
-        raise InputError(teacher, "--teacher", f"unknown teacher; available: {', '.join(TEACHERS)}")
+    spec = parse_teacher(teacher)
     try:
         prof = actuator_profile(profile)
     except ValueError as exc:
         raise InputError(profile, "--profile", str(exc)) from None
+    if spec.checkpoint is not None:
+        try:
+            trained_for = _load_residual(str(spec.checkpoint), spec.digest).cfg.profile
+        except Exception as exc:  # noqa: BLE001 - any unreadable checkpoint is a one-line input error
+            raise InputError(spec.checkpoint, "--teacher", f"unreadable residual checkpoint: {type(exc).__name__}: {exc}") from None
+        if trained_for != prof.name:
+            raise InputError(spec.checkpoint, "--teacher", f"residual trained for actuator profile {trained_for!r}, this run uses {prof.name!r}")
     src, out = stage_dir(name, "retargeted"), stage_dir(name, "physicalized")
     if not (src / "meta" / "info.json").is_file():
         raise InputError(src, "meta/info.json", "no retargeted dataset here: run `lessmimic retarget --name NAME` first")
@@ -225,7 +279,7 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
     kept = [r for r in results if r.robot is not None and (r.figures["valid"] or keep_invalid)]
     simulated = sum(r.rollout.frames for r in results if r.rollout is not None) / clips[0].fps if clips else 0.0
     report = {
-        "stage": "physicalized", "teacher": teacher, "actuator_profile": prof.name, "keep_invalid": keep_invalid,
+        "stage": "physicalized", "teacher": teacher, "teacher_sha256": spec.digest, "actuator_profile": prof.name, "keep_invalid": keep_invalid,
         "clips": per_clip, "summary": {**summarise([c for c in per_clip if "frames" in c] or per_clip),
                                          "valid_frac": float(np.mean([c["valid"] for c in per_clip])) if per_clip else 0.0,
                                          "realtime_factor": simulated / max(sum(r.rollout.seconds for r in results if r.rollout), 1e-9),
@@ -237,14 +291,16 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
     if kept:
         fps = int(round(clips[0].fps))
         features, episodes = _episodes(kept)
+        teacher_note = f"Teacher: `{teacher}`" + (f" (checkpoint sha256 {spec.digest}): the base QP controller's joint targets plus a learned "
+                                                   "residual (PPO, physicalize.residual), used deterministically (mean action)." if spec.digest else ".")
         synthetic = any(r.robot.provenance.get("synthetic") for r in kept)
         card = DatasetCard(
             title=f"{name}: G1 physicalized state-action data",
             description=("SYNTHETIC demonstrations: " if synthetic else "") + "retargeted G1 motion made physically valid by "
-            "closed-loop tracking in MuJoCo (whole-body QP teacher); every episode carries its validation figures.",
+            f"closed-loop tracking in MuJoCo (teacher `{teacher}`: whole-body QP" + (" + learned residual" if spec.digest else "") + "); every episode carries its validation figures.",
             provenance=[r.source for r in kept] + [str(src)], fps=fps, synthetic=synthetic, stage="physicalized",
             actuator_profile=f"{prof.name}: {prof.description}", license="apache-2.0" if synthetic else "other",
-            feature_frames={f.name: "world, z-up" if f.name.startswith("object.") else "" for f in features}, notes=CARD_NOTES,
+            feature_frames={f.name: "world, z-up" if f.name.startswith("object.") else "" for f in features}, notes=CARD_NOTES + [teacher_note],
         )  # fmt: skip
         write_dataset(out, f"lessmimic/{name}-physicalized", fps, features, episodes, card=card, overwrite=overwrite)
     report["seconds_wall"] = time.perf_counter() - t0

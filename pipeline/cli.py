@@ -54,6 +54,24 @@ def _cmd_physicalize(a: argparse.Namespace) -> int:
     return 0  # invalid clips are a measured outcome (in the report), not a failure of the run
 
 
+def _cmd_physicalize_residual(a: argparse.Namespace) -> int:
+    from physicalize.residual import ResidualConfig, train_residual
+    from pipeline.clip_dataset import episodes_to_robot_clips
+    from pipeline.ingest import stage_dir
+
+    src = stage_dir(a.name, "retargeted")
+    if not (src / "meta" / "info.json").is_file():
+        raise InputError(src, "meta/info.json", "no retargeted dataset here: run `lessmimic retarget --name NAME` first")
+    clips = episodes_to_robot_clips(src)
+    if not 0 <= a.episode < len(clips):
+        raise InputError(src, "--episode", f"episode {a.episode} out of range: the dataset has {len(clips)} episode(s)")
+    cfg = ResidualConfig(profile=a.profile)
+    out = train_residual(clips[a.episode], a.iterations, a.envs, a.seed, Path(a.out), config=cfg, verbose=True)
+    print(f"residual trained on {clips[a.episode].source} ({a.iterations} iterations x {a.envs} envs) -> {out}")
+    print(f"use it: lessmimic physicalize --name {a.name} --teacher base+residual:{out}")
+    return 0
+
+
 def _cmd_later_stage(a: argparse.Namespace) -> int:
     from pipeline.ingest import stage_dir
 
@@ -130,10 +148,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_retarget)
     p = sub.add_parser("physicalize", help="retargeted clips -> simulated state-action data (datasets/<NAME>/physicalized/)")
     _stage_args(p)
-    p.add_argument("--teacher", default="base", help="tracking teacher: base (whole-body QP controller)")
+    p.add_argument("--teacher", default="base", help="tracking teacher: base (whole-body QP controller) or base+residual:<checkpoint> "
+                   "(the QP's joint targets plus a learned residual trained by `lessmimic physicalize-residual`)")
     p.add_argument("--profile", default="mjlab", help="actuator profile of the actions: mjlab or lessmimic_demo (default mjlab)")
     p.add_argument("--keep-invalid", action="store_true", help="also write clips that fail validation (they are always in report.json)")
     p.set_defaults(func=_cmd_physicalize)
+    p = sub.add_parser("physicalize-residual", help="train the physicalize teacher's learned residual (PPO, CPU) on one retargeted clip")
+    p.add_argument("--name", default="default", help="dataset name: trains on datasets/<NAME>/retargeted/ (default: default)")
+    p.add_argument("--episode", type=int, default=0, help="episode index of the clip to train on (default 0)")
+    p.add_argument("--iterations", type=int, default=20, help="PPO iterations (default 20: smoke scale)")
+    p.add_argument("--envs", type=int, default=8, help="parallel simulated environments (default 8)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--profile", default="mjlab", help="actuator profile (default mjlab)")
+    p.add_argument("--out", required=True, help="checkpoint path (.pt)")
+    p.set_defaults(func=_cmd_physicalize_residual)
     p = sub.add_parser("features", help="physicalized data -> distance-field features")
     _stage_args(p)
     p.set_defaults(func=_cmd_later_stage)

@@ -1,0 +1,325 @@
+"""Layer 3 of the physicalize teacher: a learned residual on top of the whole-body QP controller.
+
+At control frame ``t`` the base controller (:class:`physicalize.wbc.WholeBodyController`) gives the
+joint targets ``u_base``; the residual policy ``pi`` adds a bounded correction::
+
+    u = u_base + s * clip(a, -1, 1),      a = pi(o_t)      (s = ResidualConfig.scale, rad)
+
+and ``u`` is what the position actuators hold for the next 4 physics steps (and what the dataset
+records as ``action``). The observation ``o_t`` (:func:`observe`, all in the current pelvis frame
+``(p, R)``) is
+
+* state: joint ``q``, ``dq``, projected gravity ``R^T [0 0 -1]``, root angular velocity (body
+  frame), root height ``p_z``, and the base targets relative to the state ``u_base - q``;
+* reference look-ahead for ``k`` in ``{0} + lookahead`` (frames, clamped to the clip): joint
+  ``q*_{t+k}``, root position ``R^T (p*_{t+k} - p)`` and orientation ``R^T R*_{t+k}`` (first two
+  columns, the 6-D rotation);
+* the first free object's pose relative to the pelvis (position, 6-D rotation) and a presence flag
+  (zeros without an object), the phase ``t / (T - 1)`` and the reference's stance flags.
+
+Reward per step (after the hold, against reference frame ``t + 1``), exp kernels ``k(e, s) = exp(-e^2/s^2)``::
+
+    r = w_q k(|q - q*|) + w_p k(|p - p*|) + w_R k(angle(R^T R*)) + w_f k(sqrt(sum_feet |x_f - x*_f|^2))
+        + w_o k(|x_o - x*_o|) + w_alive - w_rate |a - a_prev|^2
+
+(``w_o`` term is 1 without an object). An episode ends on a fall (:func:`physicalize.rollout.fallen`,
+a termination) or at the clip's end / ``max_episode_frames`` (a time-out, bootstrapped by PPO).
+Episodes start at random frames of the clip from the reference state (the velocity: median of the
+next 5 reference frames), objects at their reference pose at rest.
+
+:class:`ResidualEnv` is an ``rsl_rl.env.VecEnv`` (rsl-rl-lib 5.4.2: observations are a TensorDict
+with the group ``policy``; ``extras["time_outs"]``) over ``num_envs`` ``MjData`` of one model, each
+with its own controller; it runs on the CPU. :func:`train_residual` trains it with rsl-rl's PPO
+(``OnPolicyRunner``) and writes a checkpoint (actor weights with the observation normaliser, config,
+training figures); :meth:`ResidualPolicy.load` rebuilds the deterministic policy (mean action),
+a callable ``(data, ref, t, base_action) -> action`` for :func:`physicalize.rollout.simulate`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import time
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import torch
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from physicalize.reference import Reference
+from physicalize.rollout import SUBSTEPS, fallen
+from physicalize.wbc import FOOT_BODIES, NV_ROBOT, WholeBodyController
+from pipeline.clip import RobotClip
+from pipeline.robot import NUM_JOINTS
+
+FORMAT = "lessmimic-residual-v1"
+
+
+@dataclass(frozen=True)
+class ResidualConfig:
+    """Action scale, observation, reward and PPO settings (all stored in the checkpoint)."""
+
+    scale: float = 0.05  # rad per unit of clipped policy output
+    lookahead: tuple[int, ...] = (1, 2, 5, 10)  # reference frames ahead observed (besides the current one)
+    sigma_joint: float = 0.5  # rad (norm over the 29 joints)
+    sigma_root_pos: float = 0.1  # m
+    sigma_root_rot: float = 0.3  # rad
+    sigma_feet: float = 0.1  # m
+    sigma_object: float = 0.15  # m
+    w_joint: float = 0.5
+    w_root_pos: float = 0.5
+    w_root_rot: float = 0.5
+    w_feet: float = 0.5
+    w_object: float = 0.5
+    w_alive: float = 1.0
+    w_action_rate: float = 0.01
+    max_episode_frames: int = 250
+    start_margin: int = 10  # episodes start at frames [0, T - start_margin)
+    reference: str = "feasible"  # tracked reference (physicalize.stage.tracking_problem)
+    profile: str = "mjlab"
+    num_steps_per_env: int = 24
+    hidden_dims: tuple[int, ...] = (256, 128)
+    init_std: float = 0.5
+    learning_rate: float = 1e-3
+    num_learning_epochs: int = 5
+    num_mini_batches: int = 4
+    gamma: float = 0.99
+    lam: float = 0.95
+    entropy_coef: float = 0.005
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ResidualConfig:
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items() if k in names})
+
+
+def _mat(quat: np.ndarray) -> np.ndarray:
+    R = np.empty(9)
+    mujoco.mju_quat2Mat(R, quat)
+    return R.reshape(3, 3)
+
+
+def _rot6(R: np.ndarray) -> np.ndarray:
+    return R[:, :2].T.ravel()
+
+
+def observe(d: mujoco.MjData, ref: Reference, t: int, base_action: np.ndarray, cfg: ResidualConfig) -> np.ndarray:
+    """The policy observation ``o_t`` (float32; layout in the module docstring). The robot is the
+    model's first tree (qpos 0..35); the first free object, if any, is at qpos 36..42."""
+    T = ref.frames
+    t = min(max(t, 0), T - 1)
+    p, R = d.qpos[:3], _mat(d.qpos[3:7])
+    q = d.qpos[7 : 7 + NUM_JOINTS]
+    parts = [q, d.qvel[6:NV_ROBOT], R.T @ np.array([0.0, 0.0, -1.0]), d.qvel[3:6], p[2:3], base_action - q]
+    for k in (0, *cfg.lookahead):
+        r = ref.qpos[min(t + k, T - 1)]
+        parts += [r[7:], R.T @ (r[:3] - p), _rot6(R.T @ _mat(r[3:7]))]
+    if d.qpos.shape[0] >= 43:
+        o = d.qpos[36:43]
+        parts += [R.T @ (o[:3] - p), _rot6(R.T @ _mat(o[3:7])), np.ones(1)]
+    else:
+        parts.append(np.zeros(10))
+    parts += [np.array([t / max(T - 1, 1)]), ref.stance[t].astype(float)]
+    return np.concatenate(parts).astype(np.float32)
+
+
+def start_state(scene, ref: Reference, objects: dict[str, np.ndarray], s: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(qpos, qvel)`` at reference frame ``s``: the reference pose, the median velocity of frames
+    ``s..s+4`` (as :func:`physicalize.rollout.initial_state` at ``s = 0``), objects at their pose, at rest."""
+    m = scene.model
+    qpos, qvel = np.zeros(m.nq), np.zeros(m.nv)
+    qpos[:36], qvel[:NV_ROBOT] = ref.qpos[s], np.median(ref.qvel[s : s + 5], axis=0)
+    for name, adr in scene.object_qpos_adr.items():
+        qpos[adr : adr + 7] = objects[name][s]
+    return qpos, qvel
+
+
+def _kernel(err: float, sigma: float) -> float:
+    return float(np.exp(-(err / sigma) ** 2))
+
+
+def _actor_cfg(cfg: ResidualConfig) -> dict:
+    return {"class_name": "MLPModel", "hidden_dims": list(cfg.hidden_dims), "activation": "elu", "obs_normalization": True,
+            "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": cfg.init_std, "std_type": "scalar"}}  # fmt: skip
+
+
+class ResidualEnv(VecEnv):
+    """``num_envs`` copies of one clip's tracking problem (CPU, one ``MjData`` and controller each)."""
+
+    def __init__(self, scene, ref: Reference, objects: dict[str, np.ndarray], num_envs: int, seed: int, cfg: ResidualConfig = ResidualConfig()):
+        if ref.frames < 3:
+            raise ValueError(f"a residual needs a clip of at least 3 frames, got {ref.frames}")
+        self.scene, self.ref, self.objects, self.cfg = scene, ref, objects, cfg
+        m = self.model = scene.model
+        self.num_envs, self.num_actions, self.device = num_envs, NUM_JOINTS, "cpu"
+        self.max_episode_length = min(cfg.max_episode_frames, ref.frames - 1)
+        self.episode_length_buf = torch.zeros(num_envs, dtype=torch.long)
+        self.rng = np.random.default_rng(seed)
+        self.datas = [mujoco.MjData(m) for _ in range(num_envs)]
+        self.wbcs = [WholeBodyController(m, scene.profile) for _ in range(num_envs)]
+        self.feet = [m.body(b).id for b in FOOT_BODIES]
+        self.torso = m.body("torso_link").id
+        self.obj = next(iter(scene.object_qpos_adr.items()), None)  # (name, qpos address) of the first free object
+        self.t, self.start = np.zeros(num_envs, int), np.zeros(num_envs, int)
+        self.base, self.prev = np.zeros((num_envs, NUM_JOINTS)), np.zeros((num_envs, NUM_JOINTS))
+        self.episodes: list[tuple[int, int, bool]] = []  # (start frame, frames lived, fell)
+        self.steps, self.reward_sum = 0, 0.0
+        self.obs = np.stack([self._reset(i) for i in range(num_envs)])
+        self.obs_dim = self.obs.shape[1]
+
+    def _reset(self, i: int) -> np.ndarray:
+        s = int(self.rng.integers(0, max(1, self.ref.frames - self.cfg.start_margin)))
+        d = self.datas[i]
+        d.qpos[:], d.qvel[:] = start_state(self.scene, self.ref, self.objects, s)
+        d.ctrl[:] = 0.0
+        mujoco.mj_forward(self.model, d)
+        self.t[i] = self.start[i] = s
+        self.episode_length_buf[i] = 0
+        self.prev[i] = 0.0
+        return self._plan(i)
+
+    def _plan(self, i: int) -> np.ndarray:
+        d, t = self.datas[i], int(self.t[i])
+        self.base[i] = self.wbcs[i].solve(d, self.ref.target(t)).action
+        return observe(d, self.ref, t, self.base[i], self.cfg)
+
+    def _reward(self, d: mujoco.MjData, t: int, a: np.ndarray, a_prev: np.ndarray) -> float:
+        cfg, r = self.cfg, self.ref.qpos[t]
+        e_rot = 2.0 * np.arccos(min(1.0, abs(float(np.dot(d.qpos[3:7], r[3:7])))))
+        e_feet = np.sqrt(sum(float(np.sum((d.xpos[f] - self.ref.foot_pos[t, k]) ** 2)) for k, f in enumerate(self.feet)))
+        rew = (cfg.w_joint * _kernel(np.linalg.norm(d.qpos[7:36] - r[7:]), cfg.sigma_joint)
+               + cfg.w_root_pos * _kernel(np.linalg.norm(d.qpos[:3] - r[:3]), cfg.sigma_root_pos)
+               + cfg.w_root_rot * _kernel(e_rot, cfg.sigma_root_rot) + cfg.w_feet * _kernel(e_feet, cfg.sigma_feet)
+               + cfg.w_alive - cfg.w_action_rate * float(np.sum((a - a_prev) ** 2)))  # fmt: skip
+        if self.obj is not None:
+            name, adr = self.obj
+            rew += cfg.w_object * _kernel(np.linalg.norm(d.qpos[adr : adr + 3] - self.objects[name][t, :3]), cfg.sigma_object)
+        else:
+            rew += cfg.w_object
+        return rew
+
+    def get_observations(self) -> TensorDict:
+        return TensorDict({"policy": torch.from_numpy(self.obs.copy())}, batch_size=[self.num_envs])
+
+    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+        """Apply ``u = u_base + s clip(a)`` for one control period in every env; reset finished ones."""
+        a = np.clip(actions.detach().cpu().numpy().astype(np.float64), -1.0, 1.0)
+        n, T = self.num_envs, self.ref.frames
+        rew, done, timeout = np.zeros(n, np.float32), np.zeros(n, bool), np.zeros(n, bool)
+        for i in range(n):
+            d = self.datas[i]
+            d.ctrl[:] = self.base[i] + self.cfg.scale * a[i]
+            for _ in range(SUBSTEPS):
+                mujoco.mj_step(self.model, d)
+            mujoco.mj_forward(self.model, d)
+            t = self.t[i] = self.t[i] + 1
+            self.episode_length_buf[i] += 1
+            rew[i] = self._reward(d, t, a[i], self.prev[i])
+            self.prev[i] = a[i]
+            fell = fallen(d, self.ref.qpos[t, 2], self.torso)
+            timeout[i] = not fell and (t >= T - 1 or int(self.episode_length_buf[i]) >= self.max_episode_length)
+            done[i] = fell or timeout[i]
+            if done[i]:
+                self.episodes.append((int(self.start[i]), int(self.episode_length_buf[i]), bool(fell)))
+                self.obs[i] = self._reset(i)
+            else:
+                self.obs[i] = self._plan(i)
+        self.steps += n
+        self.reward_sum += float(rew.sum())
+        extras = {"time_outs": torch.from_numpy(timeout), "log": {"/residual/falls": float((done & ~timeout).sum())}}
+        return self.get_observations(), torch.from_numpy(rew), torch.from_numpy(done), extras
+
+
+def _train_cfg(cfg: ResidualConfig) -> dict:
+    """rsl-rl-lib 5.4.2 OnPolicyRunner configuration (PPO, MLP actor/critic with observation normalisation)."""
+    return {
+        "num_steps_per_env": cfg.num_steps_per_env, "save_interval": 10**9, "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
+        "algorithm": {"class_name": "PPO", "learning_rate": cfg.learning_rate, "num_learning_epochs": cfg.num_learning_epochs,
+                      "num_mini_batches": cfg.num_mini_batches, "gamma": cfg.gamma, "lam": cfg.lam, "entropy_coef": cfg.entropy_coef,
+                      "clip_param": 0.2, "value_loss_coef": 1.0, "max_grad_norm": 1.0, "schedule": "adaptive", "desired_kl": 0.01,
+                      "rnd_cfg": None, "symmetry_cfg": None},
+        "actor": _actor_cfg(cfg),
+        "critic": {"class_name": "MLPModel", "hidden_dims": list(cfg.hidden_dims), "activation": "elu", "obs_normalization": True},
+    }  # fmt: skip
+
+
+def train_residual(clip: RobotClip, iterations: int, num_envs: int, seed: int, out_path: str | Path, *,
+                   config: ResidualConfig = ResidualConfig(), verbose: bool = False) -> Path:  # fmt: skip
+    """Train the residual on one retargeted ``clip`` with PPO (``iterations`` x ``num_envs`` x
+    ``config.num_steps_per_env`` env steps; torch on 1 thread, seeded) and write the checkpoint to
+    ``out_path`` (atomically). Deterministic for a seed on one machine."""
+    from rsl_rl.runners import OnPolicyRunner
+
+    from physicalize.stage import tracking_problem
+
+    torch.manual_seed(seed)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # measured 3.4x faster than 2 threads on a loaded 2-core machine (FIELD-NOTES)
+    try:
+        scene, ref, objects, _ = tracking_problem(clip, config.profile, config.reference)
+        env = ResidualEnv(scene, ref, objects, num_envs, seed, config)
+        with contextlib.redirect_stdout(io.StringIO()):  # the runner prints its models
+            runner = OnPolicyRunner(env, _train_cfg(config), log_dir=None, device="cpu")
+        history, t0 = [], time.perf_counter()
+        for it in range(iterations):
+            n_ep, steps, rsum = len(env.episodes), env.steps, env.reward_sum
+            runner.learn(1)
+            ended = env.episodes[n_ep:]
+            row = {"iteration": it, "reward_per_step": (env.reward_sum - rsum) / max(env.steps - steps, 1), "episodes": len(ended),
+                   "mean_episode_frames": float(np.mean([e[1] for e in ended])) if ended else None,
+                   "fall_frac": float(np.mean([e[2] for e in ended])) if ended else None}  # fmt: skip
+            history.append(row)
+            if verbose:
+                print(" ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()), flush=True)
+        seconds = time.perf_counter() - t0
+        actor = runner.alg.get_policy()
+        ckpt = {"format": FORMAT, "config": {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(config).items()},
+                "obs_dim": env.obs_dim, "actor_state_dict": actor.state_dict(), "critic_state_dict": runner.alg.critic.state_dict(),
+                "training": {"source": clip.source, "frames": ref.frames, "iterations": iterations, "num_envs": num_envs, "seed": seed,
+                             "env_steps": env.steps, "seconds": seconds, "history": history}}  # fmt: skip
+    finally:
+        torch.set_num_threads(threads)
+    out = Path(out_path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".tmp")
+    torch.save(ckpt, tmp)
+    tmp.replace(out)
+    return out
+
+
+class ResidualPolicy:
+    """A trained residual, deterministic (the Gaussian's mean): ``policy(data, ref, t, base_action) -> action``."""
+
+    def __init__(self, actor: torch.nn.Module, config: ResidualConfig, obs_dim: int, training: dict):
+        self.actor, self.cfg, self.obs_dim, self.training = actor.eval(), config, obs_dim, training
+
+    @classmethod
+    def load(cls, path: str | Path) -> ResidualPolicy:
+        """Rebuild the actor (with its observation normaliser) from a :func:`train_residual` checkpoint."""
+        from rsl_rl.models import MLPModel
+
+        ck = torch.load(Path(path), map_location="cpu", weights_only=True)
+        if not isinstance(ck, dict) or ck.get("format") != FORMAT:
+            raise ValueError(f"{path}: not a {FORMAT} checkpoint")
+        cfg = ResidualConfig.from_dict(ck["config"])
+        spec = _actor_cfg(cfg)
+        spec.pop("class_name")
+        dummy = TensorDict({"policy": torch.zeros(1, ck["obs_dim"])}, batch_size=[1])
+        actor = MLPModel(dummy, {"actor": ["policy"]}, "actor", NUM_JOINTS, **spec)
+        actor.load_state_dict(ck["actor_state_dict"])
+        return cls(actor, cfg, ck["obs_dim"], ck.get("training", {}))
+
+    def correction(self, obs: np.ndarray) -> np.ndarray:
+        """``clip(pi(o), -1, 1)`` for a batch of observations (n, obs_dim)."""
+        with torch.inference_mode():
+            a = self.actor(TensorDict({"policy": torch.as_tensor(obs, dtype=torch.float32)}, batch_size=[obs.shape[0]]))
+        return np.clip(a.numpy().astype(np.float64), -1.0, 1.0)
+
+    def __call__(self, data: mujoco.MjData, ref: Reference, t: int, base_action: np.ndarray) -> np.ndarray:
+        obs = observe(data, ref, t, base_action, self.cfg)
+        if obs.shape[0] != self.obs_dim:
+            raise ValueError(f"observation has {obs.shape[0]} values, the checkpoint's policy takes {self.obs_dim}")
+        return base_action + self.cfg.scale * self.correction(obs[None])[0]
