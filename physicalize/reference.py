@@ -48,8 +48,8 @@ class Reference:
     def frames(self) -> int:
         return self.qpos.shape[0]
 
-    def _derivatives(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(com, com velocity, com acceleration, foot velocity) over the clip, computed once per CoM
+    def _derivatives(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(com, com velocity, com acceleration, foot velocity, foot acceleration) over the clip, computed once per CoM
         series (the plan may replace ``com_plan`` after construction)."""
         com = self.com if self.com_plan is None else self.com_plan
         cached = getattr(self, "_cache", None)
@@ -57,20 +57,21 @@ class Reference:
             if self.frames > 1:
                 dt = 1.0 / self.fps
                 cv = np.gradient(com, dt, axis=0)
-                derived = (cv, np.gradient(cv, dt, axis=0), np.gradient(self.foot_pos, dt, axis=0))
+                fv = np.gradient(self.foot_pos, dt, axis=0)
+                derived = (cv, np.gradient(cv, dt, axis=0), fv, np.gradient(fv, dt, axis=0))
             else:
-                derived = (np.zeros_like(com), np.zeros_like(com), np.zeros_like(self.foot_pos))
+                derived = (np.zeros_like(com), np.zeros_like(com), np.zeros_like(self.foot_pos), np.zeros_like(self.foot_pos))
             cached = self._cache = (com, *derived)
         return cached
 
     def target(self, t: int) -> Target:
         """The controller's target at frame ``t`` (clamped to the clip)."""
         t = min(max(t, 0), self.frames - 1)
-        com, cv, ca, fv = self._derivatives()
+        com, cv, ca, fv, fa = self._derivatives()
         return Target(
             qpos=self.qpos[t], qvel=self.qvel[t], qacc=self.qacc[t], com=com[t], com_vel=cv[t], com_acc=ca[t],
             stance=(bool(self.stance[t, 0]), bool(self.stance[t, 1])), foot_pos=self.foot_pos[t],
-            foot_quat=self.foot_quat[t], foot_vel=fv[t], hand_pos=self.hand_pos[t], torso_quat=self.torso_quat[t],
+            foot_quat=self.foot_quat[t], foot_vel=fv[t], foot_acc=fa[t], hand_pos=self.hand_pos[t], torso_quat=self.torso_quat[t],
         )  # fmt: skip
 
 

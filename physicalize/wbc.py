@@ -54,6 +54,7 @@ class WBCConfig:
     hand_kd: float = 20.0
     posture_kp: float = 100.0
     posture_kd: float = 20.0
+    swing_ff: float = 1.0  # feed-forward of the reference swing-foot acceleration
     stance_kv: float = 20.0
     stance_flat_kp: float = 100.0
     w_com: float = 1000.0
@@ -80,6 +81,7 @@ class Target:
     foot_pos: np.ndarray  # (2, 3) foot body origins
     foot_quat: np.ndarray  # (2, 4)
     foot_vel: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
+    foot_acc: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
     hand_pos: np.ndarray | None = None  # (2, 3), None: hands follow the posture only
     torso_quat: np.ndarray | None = None  # (4,), None: the pelvis orientation
 
@@ -239,7 +241,7 @@ class WholeBodyController:
             else:
                 ep = target.foot_pos[k] - d.xpos[fb]
                 er = orientation_error(_quat_mat(target.foot_quat[k]), R)
-                a = np.concatenate([cfg.foot_kp * ep + cfg.foot_kd * (target.foot_vel[k] - v6[:3]), cfg.orient_kp * er - cfg.orient_kd * v6[3:]])
+                a = np.concatenate([cfg.swing_ff * target.foot_acc[k] + cfg.foot_kp * ep + cfg.foot_kd * (target.foot_vel[k] - v6[:3]), cfg.orient_kp * er - cfg.orient_kd * v6[3:]])
                 task(J6, a - b6, cfg.w_swing)
         if target.hand_pos is not None:
             for k in range(2):
