@@ -32,7 +32,6 @@ GRAVITY = 9.81
 MARGIN = 0.015
 SINGLE_SUPPORT_SCALE = 0.3  # single-support ZMP within this fraction of the foot about its centre
 PREVIEW_S = 1.6
-PREROLL_S = 3.2
 
 
 @lru_cache(maxsize=16)
@@ -99,31 +98,27 @@ def zmp_reference(ref: Reference, single_support_scale: float = SINGLE_SUPPORT_S
 
 
 def plan_com(ref: Reference) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(com_plan (T, 3), zmp_ref (T, 2), zmp_plan (T, 2)): the preview-controlled CoM.
-
-    The plan starts at rest over the first ZMP reference (inside the first support polygon: a
-    retargeted clip may start with its CoM outside the feet, a state no support force could hold;
-    the feasible reference starts from the plan). The preview law's steady state needs a wound-up
-    error integral (``G_x[0] + sum G_d != 0`` for a finite preview), so it first runs
-    :data:`PREROLL_S` on the constant first reference: without it the first frames' ZMP jumped up
-    to 31 cm out of the support (measured on the default PickUp clip; with it: 1 mm)."""
+    """(com_plan (T, 3), zmp_ref (T, 2), zmp_plan (T, 2)): the preview-controlled CoM, starting at
+    the reference's first CoM and CoM velocity."""
     dt = 1.0 / ref.fps
     zc = float(np.mean(ref.com[:, 2] - np.min(ref.corners[..., 2], axis=(1, 2))))
-    n, pre = int(round(PREVIEW_S / dt)), int(round(PREROLL_S / dt))
+    n = int(round(PREVIEW_S / dt))
     gi, gx, gd = preview_gains(dt, zc, n)
     pref = zmp_reference(ref)
     T = ref.frames
-    padded = np.concatenate([np.repeat(pref[:1], pre, axis=0), pref, np.repeat(pref[-1:], n, axis=0)])
+    padded = np.concatenate([pref, np.repeat(pref[-1:], n, axis=0)])
     A = np.array([[1.0, dt, dt * dt / 2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
     B = np.array([dt**3 / 6, dt * dt / 2, dt])
     x = np.zeros((3, 2))
-    x[0] = pref[0]
+    x[0] = ref.com[0, :2]
+    if T > 2:
+        x[1] = np.median(np.diff(ref.com[:6, :2], axis=0), axis=0) / dt  # as the initial state's velocity
     err = np.zeros(2)
-    com, zmp = np.zeros((pre + T, 2)), np.zeros((pre + T, 2))
-    for k in range(pre + T):
+    com, zmp = np.zeros((T, 2)), np.zeros((T, 2))
+    for k in range(T):
         p = x[0] - zc / GRAVITY * x[2]
         com[k], zmp[k] = x[0], p
-        err += p - padded[k]
+        err += p - pref[k]
         u = -gi * err - gx @ x - gd @ padded[k + 1 : k + 1 + n]
         x = A @ x + np.outer(B, u)
-    return np.column_stack([com[pre:], ref.com[:, 2]]), pref, zmp[pre:]
+    return np.column_stack([com, ref.com[:, 2]]), pref, zmp
