@@ -66,6 +66,7 @@ class GraspConfig:
     max_gap: float = 0.10  # a labelled hand farther than this from the object does not grasp
     w_hold: float = 100.0  # hand task weight while grasping
     w_free: float = 5.0  # hand task weight otherwise (the controller's default)
+    w_hold_rot: float = 0.0  # hand orientation task weight while grasping (0: posture only)
     replace_measured: bool = True
 
 
@@ -84,6 +85,8 @@ class GraspSchedule:
     body: np.ndarray  # (T, 2) int: body id of the grasped object, -1 none
     obj: np.ndarray  # (T,) int: index of the grasped object in the object list, -1 none
     friction_ok: np.ndarray  # (T,) bool: mu N_k >= |F_t,k| for both hands (True when not grasping)
+    rot: np.ndarray  # (T, 2, 3, 3) reference hand orientations
+    rot_weight: np.ndarray  # (T, 2) hand orientation task weight (0 when not grasping)
     mu: float
     replace_measured: bool = True
 
@@ -92,6 +95,7 @@ class GraspSchedule:
         target.hand_pos, target.hand_vel, target.hand_acc = self.point[t], self.vel[t], self.acc[t]
         target.hand_offset, target.hand_weight, target.hand_force = self.offset, self.weight[t], self.force[t]
         target.hand_object = self.body[t] if self.replace_measured else np.full(2, -1)
+        target.hand_rot, target.hand_rot_weight = self.rot[t], self.rot_weight[t]
         return target
 
 
@@ -165,7 +169,7 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
     hand_ids = [m.body(b).id for b in HAND_BODIES]
     offset = hand_offsets(m)
     d = mujoco.MjData(m)
-    centre = np.zeros((T, 2, 3))
+    centre, rot = np.zeros((T, 2, 3)), np.zeros((T, 2, 3, 3))
     normal, gap = np.zeros((T, 2, 3)), np.zeros((T, 2))
     obj = np.full(T, -1)
     fromto = np.zeros(6)
@@ -176,7 +180,8 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
             d.qpos[adr : adr + 7] = objects[n][t]
         mujoco.mj_kinematics(m, d)
         for k in range(2):
-            centre[t, k] = d.xpos[hand_ids[k]] + d.xmat[hand_ids[k]].reshape(3, 3) @ offset[k]
+            rot[t, k] = d.xmat[hand_ids[k]].reshape(3, 3)
+            centre[t, k] = d.xpos[hand_ids[k]] + rot[t, k] @ offset[k]
         if not labels[t].all():
             continue
         best = None
@@ -237,4 +242,4 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
     if not grasped.any():
         return None
     return GraspSchedule(offset, point, vel, acc, weight, force, normal, np.repeat(grasped[:, None], 2, 1), body, obj, friction_ok,
-                         float(mu), cfg.replace_measured)  # fmt: skip
+                         rot, np.repeat((s * cfg.w_hold_rot)[:, None], 2, 1), float(mu), cfg.replace_measured)  # fmt: skip

@@ -54,11 +54,14 @@ def _scene_for(clip: RobotClip, profile: str):
 REFERENCES = ("raw", "planned", "feasible")
 
 
-def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str = "feasible", perturb=None) -> tuple[RobotClip | None, Rollout, dict, dict]:
+def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str = "feasible", perturb=None,
+                     grasp: bool = True) -> tuple[RobotClip | None, Rollout, dict, dict]:  # fmt: skip
     """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip, tracking the
     ``reference``: ``raw`` (the retargeted motion and its kinematic CoM), ``planned`` (its posture
-    with the ZMP-planned CoM) or ``feasible`` (the whole body re-solved by IK onto the plan)."""
+    with the ZMP-planned CoM) or ``feasible`` (the whole body re-solved by IK onto the plan); with
+    ``grasp``, hands that hold an object squeeze it and carry its weight (:mod:`physicalize.grasp`)."""
     from physicalize.feasible import feasible_reference
+    from physicalize.grasp import grasp_schedule
     from physicalize.plan import plan_com
     from physicalize.reference import build_reference
     from physicalize.rollout import initial_state, replay, simulate
@@ -78,6 +81,8 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
         ref = feasible_reference(scene.model, ref, plan_com, stats=stats)
         zmp = stats["plan"][2]
     objects = {o.name: o.pose for o in clip.objects}
+    if grasp:
+        ref.grasp = grasp_schedule(scene, ref, clip.contact_links, clip.contacts, objects)
     qpos0, qvel0 = initial_state(scene, ref, objects)
     roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile), qpos0, qvel0, contact_links=clip.contact_links, perturb=perturb)
     roll.seconds = time.perf_counter() - t0  # planning + tracking

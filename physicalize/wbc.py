@@ -90,6 +90,8 @@ class Target:
     hand_weight: np.ndarray | None = None  # (2,) task weight per hand
     hand_force: np.ndarray | None = None  # (2, 3) force each hand applies to a held object (world)
     hand_object: np.ndarray | None = None  # (2,) body id whose measured contacts with the hand hand_force replaces, -1 none
+    hand_rot: np.ndarray | None = None  # (2, 3, 3) hand orientations, tracked with weights hand_rot_weight (2,)
+    hand_rot_weight: np.ndarray | None = None
 
 
 @dataclass
@@ -261,9 +263,12 @@ class WholeBodyController:
             for k in range(2):
                 hb = self.hands[k]
                 p = d.xpos[hb] + d.xmat[hb].reshape(3, 3) @ off[k]
-                Jp, _, bp, _ = self._jac(d, hb, p)
+                Jp, Jr, bp, br = self._jac(d, hb, p)
                 a = ha[k] + cfg.hand_kp * (target.hand_pos[k] - p) + cfg.hand_kd * (hv[k] - Jp @ qd)
                 task(Jp, a - bp, cfg.w_hand if target.hand_weight is None else float(target.hand_weight[k]))
+                if target.hand_rot is not None and target.hand_rot_weight[k] > 0:
+                    err = orientation_error(target.hand_rot[k], d.xmat[hb].reshape(3, 3))
+                    task(Jr, cfg.orient_kp * err - cfg.orient_kd * (Jr @ qd) - br, float(target.hand_rot_weight[k]))
                 if target.hand_force is not None:
                     if target.hand_object is not None and target.hand_object[k] >= 0:
                         tau_ext = tau_ext - self.external_forces(d, self.hand_geoms[k], int(target.hand_object[k]))
