@@ -37,6 +37,7 @@ from pipeline.scene import link_collision_geoms
 NV_ROBOT = 6 + NUM_JOINTS
 FOOT_BODIES = ("left_ankle_roll_link", "right_ankle_roll_link")
 HAND_BODIES = ("left_wrist_yaw_link", "right_wrist_yaw_link")
+GRIP_LINKS = ("elbow_link", "wrist_roll_link", "wrist_pitch_link", "wrist_yaw_link")  # forearm and hand: a held object's contacts on them are planned
 CONTROL_DT = 0.02
 
 
@@ -89,7 +90,7 @@ class Target:
     hand_acc: np.ndarray | None = None
     hand_weight: np.ndarray | None = None  # (2,) task weight per hand
     hand_force: np.ndarray | None = None  # (2, 3) force each hand applies to a held object (world)
-    hand_object: np.ndarray | None = None  # (2,) body id whose measured contacts with the hand hand_force replaces, -1 none
+    hand_object: np.ndarray | None = None  # (2,) body id whose measured contacts with that forearm and hand hand_force replaces, -1 none
     hand_rot: np.ndarray | None = None  # (2, 3, 3) hand orientations, tracked with weights hand_rot_weight (2,)
     hand_rot_weight: np.ndarray | None = None
 
@@ -152,7 +153,7 @@ class WholeBodyController:
         self.pelvis, self.torso = model.body("pelvis").id, model.body("torso_link").id
         self.feet = [model.body(b).id for b in FOOT_BODIES]
         self.hands = [model.body(b).id for b in HAND_BODIES]
-        self.hand_geoms = [set(link_collision_geoms(model, b)) for b in HAND_BODIES]
+        self.grip_geoms = [{g for link in GRIP_LINKS for g in link_collision_geoms(model, f"{side}_{link}")} for side in ("left", "right")]
         self.corners = np.stack([sole_corners(model, b) for b in FOOT_BODIES])
         self.robot_bodies = [b for b in range(1, model.nbody) if model.body_rootid[b] == self.pelvis]
         self.robot_mass = float(sum(model.body_mass[b] for b in self.robot_bodies))
@@ -271,7 +272,7 @@ class WholeBodyController:
                     task(Jr, cfg.orient_kp * err - cfg.orient_kd * (Jr @ qd) - br, float(target.hand_rot_weight[k]))
                 if target.hand_force is not None:
                     if target.hand_object is not None and target.hand_object[k] >= 0:
-                        tau_ext = tau_ext - self.external_forces(d, self.hand_geoms[k], int(target.hand_object[k]))
+                        tau_ext = tau_ext - self.external_forces(d, self.grip_geoms[k], int(target.hand_object[k]))
                     tau_ext = tau_ext - Jp.T @ target.hand_force[k]
         qj, qdj = d.qpos[7 : 7 + NUM_JOINTS], qd[6:]
         Jq = np.zeros((NUM_JOINTS, nv))
