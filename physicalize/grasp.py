@@ -31,10 +31,16 @@ track this module plans, per control frame ``t`` and hand ``k``:
   (frictionless) cannot hold anything and raises.
 
 The controller (:class:`physicalize.wbc.WholeBodyController`) adds ``-J_k^T f_k`` (the object's
-reaction at the hand point) to the measured external generalized force ``tau_ext``; with
-:attr:`GraspConfig.replace_measured` it first removes the measured hand-object contact forces of a
-grasping hand, whose one-step-old compensation would otherwise act as an integrator on the squeeze
-(a blocked hand pushed by ``M qdd*`` more every step). Contacts of other links stay measured.
+reaction at the hand point) to the measured external generalized force ``tau_ext`` -- so the QP's
+floating-base rows and torques carry the object's weight and inertia while the reference lifts it;
+with :attr:`GraspConfig.replace_measured` it first removes the measured contact forces of the held
+object on that whole forearm (:data:`physicalize.wbc.GRIP_LINKS`), whose one-step-old compensation
+would otherwise act as an integrator on the squeeze: a blocked hand is pushed by the last contact
+force plus ``M qdd*`` more at every step (measured: the box was dropped; the wrist capsules,
+compensated, pressed 30 N on its top edge and turned it). Contacts of other links stay measured.
+Optionally (:attr:`GraspConfig.w_hold_rot`) the grasping hands also track their reference
+orientation. Holding also needs the scene's elliptic friction cones with ``impratio`` 10
+(:mod:`pipeline.scene`): with pyramidal cones and ``impratio`` 1 a squeezed box crept down 2-3 cm/s.
 """
 
 from __future__ import annotations

@@ -16,6 +16,9 @@ object's inertia is not in ``M``, but its measured contact forces on the robot a
 feed-forward: centre of mass, pelvis and torso orientation, swing-foot poses, hand positions and a
 posture from the reference. Stance feet hold still with a damping term and are turned back flat
 (``a_foot* = -k_v v - k_p [0; roll/pitch error]``), which keeps a foot from rolling onto its edge.
+Hand tasks track a point of each hand (``Target.hand_offset``) with per-hand weights and, while a hand
+holds an object (:mod:`physicalize.grasp`), the planned force ``f_k`` it applies enters as the
+reaction ``-J_k^T f_k`` in ``tau_ext`` in place of that object's measured contacts on the forearm.
 
 The joint torques ``tau = M_a qdd + h_a - J_{c,a}^T f - tau_ext,a`` become PD position targets held
 for the control period ``T`` (4 physics steps): ``q* = q_m + (tau + k_d qd_m) / k_p`` at the
