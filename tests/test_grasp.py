@@ -204,3 +204,12 @@ def test_compensating_the_measured_squeeze_drops_the_box(scene):
     on the squeeze) -- the grip is lost (the box ends more than 5 cm below the reference)."""
     roll, box, sim = _lift(scene, GraspConfig(replace_measured=False))
     assert np.linalg.norm(sim[-1, :3] - box[-1, :3]) > 0.05
+
+
+def test_a_frictionless_hand_contact_cannot_grasp():
+    scene = _scene()
+    qpos, box, contacts = _lift_clip(scene)
+    ref = build_reference(scene.model, qpos, 50)
+    scene.model.geom_condim[scene.model.geom("box_col0").id] = 1  # the box's rules make the hand contact frictionless
+    with pytest.raises(ValueError, match="frictionless"):
+        grasp_schedule(scene, ref, LINKS, contacts, {"box": box})
