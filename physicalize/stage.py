@@ -90,12 +90,14 @@ def _scene_for(clip: RobotClip, profile: str):
 REFERENCES = ("raw", "planned", "feasible")
 
 
-def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "feasible"):
+def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "feasible", grasp: bool = True):
     """``(scene, tracked Reference, object tracks {name: (T, 7)}, planned ZMP or None)`` of one clip,
     tracking the ``reference``: ``raw`` (the retargeted motion and its kinematic CoM), ``planned`` (its
-    posture with the ZMP-planned CoM) or ``feasible`` (the whole body re-solved by IK onto the plan).
+    posture with the ZMP-planned CoM) or ``feasible`` (the whole body re-solved by IK onto the plan);
+    with ``grasp``, hands that hold an object squeeze it and carry its weight (:mod:`physicalize.grasp`).
     Shared by :func:`physicalize_clip` and the residual's training (:mod:`physicalize.residual`)."""
     from physicalize.feasible import feasible_reference
+    from physicalize.grasp import grasp_schedule
     from physicalize.plan import plan_com
     from physicalize.reference import build_reference
 
@@ -110,11 +112,14 @@ def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "
         stats: dict = {}
         ref = feasible_reference(scene.model, ref, plan_com, stats=stats)
         zmp = stats["plan"][2]
-    return scene, ref, {o.name: o.pose for o in clip.objects}, zmp
+    objects = {o.name: o.pose for o in clip.objects}
+    if grasp:
+        ref.grasp = grasp_schedule(scene, ref, clip.contact_links, clip.contacts, objects)
+    return scene, ref, objects, zmp
 
 
 def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str = "feasible", perturb=None,
-                     teacher: str = "base") -> tuple[RobotClip | None, Rollout, dict, dict]:  # fmt: skip
+                     teacher: str = "base", grasp: bool = True) -> tuple[RobotClip | None, Rollout, dict, dict]:  # fmt: skip
     """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
     ``reference`` (see :func:`tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`)."""
     from physicalize.rollout import initial_state, replay, simulate
@@ -124,7 +129,7 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
     spec = parse_teacher(teacher)
     residual = None if spec.checkpoint is None else _load_residual(str(spec.checkpoint), spec.digest)
     t0 = time.perf_counter()
-    scene, ref, objects, zmp = tracking_problem(clip, profile, reference)
+    scene, ref, objects, zmp = tracking_problem(clip, profile, reference, grasp)
     qpos0, qvel0 = initial_state(scene, ref, objects)
     roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile), qpos0, qvel0, contact_links=clip.contact_links, perturb=perturb,
                     residual=residual)  # fmt: skip

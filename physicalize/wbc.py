@@ -16,6 +16,9 @@ object's inertia is not in ``M``, but its measured contact forces on the robot a
 feed-forward: centre of mass, pelvis and torso orientation, swing-foot poses, hand positions and a
 posture from the reference. Stance feet hold still with a damping term and are turned back flat
 (``a_foot* = -k_v v - k_p [0; roll/pitch error]``), which keeps a foot from rolling onto its edge.
+Hand tasks track a point of each hand (``Target.hand_offset``) with per-hand weights and, while a hand
+holds an object (:mod:`physicalize.grasp`), the planned force ``f_k`` it applies enters as the
+reaction ``-J_k^T f_k`` in ``tau_ext`` in place of that object's measured contacts on the forearm.
 
 The joint torques ``tau = M_a qdd + h_a - J_{c,a}^T f - tau_ext,a`` become PD position targets held
 for the control period ``T`` (4 physics steps): ``q* = q_m + (tau + k_d qd_m) / k_p`` at the
@@ -32,10 +35,12 @@ import numpy as np
 from qpsolvers import solve_qp
 
 from pipeline.robot import NUM_JOINTS, ActuatorProfile
+from pipeline.scene import link_collision_geoms
 
 NV_ROBOT = 6 + NUM_JOINTS
 FOOT_BODIES = ("left_ankle_roll_link", "right_ankle_roll_link")
 HAND_BODIES = ("left_wrist_yaw_link", "right_wrist_yaw_link")
+GRIP_LINKS = ("elbow_link", "wrist_roll_link", "wrist_pitch_link", "wrist_yaw_link")  # forearm and hand: a held object's contacts on them are planned
 CONTROL_DT = 0.02
 
 
@@ -95,6 +100,15 @@ class Target:
     sole_height: np.ndarray | None = None  # (2,) the reference soles' height above the floor (for touchdown)
     hand_pos: np.ndarray | None = None  # (2, 3), None: hands follow the posture only
     torso_quat: np.ndarray | None = None  # (4,), None: the pelvis orientation
+    # hand task extras (physicalize.grasp); None: body origins, no feed-forward, weight w_hand
+    hand_offset: np.ndarray | None = None  # (2, 3) tracked point in each hand's body frame
+    hand_vel: np.ndarray | None = None  # (2, 3) target velocity / acceleration of that point
+    hand_acc: np.ndarray | None = None
+    hand_weight: np.ndarray | None = None  # (2,) task weight per hand
+    hand_force: np.ndarray | None = None  # (2, 3) force each hand applies to a held object (world)
+    hand_object: np.ndarray | None = None  # (2,) body id whose measured contacts with that forearm and hand hand_force replaces, -1 none
+    hand_rot: np.ndarray | None = None  # (2, 3, 3) hand orientations, tracked with weights hand_rot_weight (2,)
+    hand_rot_weight: np.ndarray | None = None
 
 
 @dataclass
@@ -155,6 +169,7 @@ class WholeBodyController:
         self.pelvis, self.torso = model.body("pelvis").id, model.body("torso_link").id
         self.feet = [model.body(b).id for b in FOOT_BODIES]
         self.hands = [model.body(b).id for b in HAND_BODIES]
+        self.grip_geoms = [{g for link in GRIP_LINKS for g in link_collision_geoms(model, f"{side}_{link}")} for side in ("left", "right")]
         self.corners = np.stack([sole_corners(model, b) for b in FOOT_BODIES])
         self.robot_bodies = [b for b in range(1, model.nbody) if model.body_rootid[b] == self.pelvis]
         self.robot_mass = float(sum(model.body_mass[b] for b in self.robot_bodies))
@@ -186,9 +201,10 @@ class WholeBodyController:
         J = J[:, :NV_ROBOT]
         return d.subtree_com[self.pelvis].copy(), J, bias / self.robot_mass, J @ d.qvel[:NV_ROBOT]
 
-    def external_forces(self, d) -> np.ndarray:
+    def external_forces(self, d, robot_geoms: set[int] | None = None, other_body: int | None = None) -> np.ndarray:
         """Generalized force (35,) on the robot from every contact except its own feet on the floor
-        and its self-collisions (objects, seats, other links on the floor), measured in the simulation."""
+        and its self-collisions (objects, seats, other links on the floor), measured in the simulation;
+        only those of ``robot_geoms`` with ``other_body`` when given."""
         tau = np.zeros(NV_ROBOT)
         f6 = np.zeros(6)
         for i in range(d.ncon):
@@ -199,6 +215,8 @@ class WholeBodyController:
                 continue
             rg, other = (g1, g2) if r1 else (g2, g1)
             if other == self.floor and self.m.geom_bodyid[rg] in self.feet:
+                continue
+            if other_body is not None and (rg not in robot_geoms or self.m.geom_bodyid[other] != other_body):
                 continue
             mujoco.mj_contactForce(self.m, d, i, f6)
             f = c.frame.reshape(3, 3).T @ f6[:3]  # on geom2, world frame
@@ -256,12 +274,24 @@ class WholeBodyController:
                 er = orientation_error(_quat_mat(target.foot_quat[k]), R)
                 a = np.concatenate([cfg.swing_ff * target.foot_acc[k] + cfg.foot_kp * ep + cfg.foot_kd * (target.foot_vel[k] - v6[:3]), cfg.orient_kp * er - cfg.orient_kd * v6[3:]])
                 task(J6, a - b6, cfg.w_swing)
-        if target.hand_pos is not None:
+        if target.hand_pos is not None:  # hand point tasks; a held object's planned reaction -J^T f in tau_ext
+            z3 = np.zeros((2, 3))
+            off = z3 if target.hand_offset is None else target.hand_offset
+            hv = z3 if target.hand_vel is None else target.hand_vel
+            ha = z3 if target.hand_acc is None else target.hand_acc
             for k in range(2):
                 hb = self.hands[k]
-                Jp, _, bp, _ = self._jac(d, hb, d.xpos[hb])
-                a = cfg.hand_kp * (target.hand_pos[k] - d.xpos[hb]) - cfg.hand_kd * (Jp @ qd)
-                task(Jp, a - bp, cfg.w_hand)
+                p = d.xpos[hb] + d.xmat[hb].reshape(3, 3) @ off[k]
+                Jp, Jr, bp, br = self._jac(d, hb, p)
+                a = ha[k] + cfg.hand_kp * (target.hand_pos[k] - p) + cfg.hand_kd * (hv[k] - Jp @ qd)
+                task(Jp, a - bp, cfg.w_hand if target.hand_weight is None else float(target.hand_weight[k]))
+                if target.hand_rot is not None and target.hand_rot_weight[k] > 0:
+                    err = orientation_error(target.hand_rot[k], d.xmat[hb].reshape(3, 3))
+                    task(Jr, cfg.orient_kp * err - cfg.orient_kd * (Jr @ qd) - br, float(target.hand_rot_weight[k]))
+                if target.hand_force is not None:
+                    if target.hand_object is not None and target.hand_object[k] >= 0:
+                        tau_ext = tau_ext - self.external_forces(d, self.grip_geoms[k], int(target.hand_object[k]))
+                    tau_ext = tau_ext - Jp.T @ target.hand_force[k]
         qj, qdj = d.qpos[7 : 7 + NUM_JOINTS], qd[6:]
         Jq = np.zeros((NUM_JOINTS, nv))
         Jq[:, 6:] = np.eye(NUM_JOINTS)

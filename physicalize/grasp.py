@@ -1,0 +1,251 @@
+"""Holding objects by contact alone: a per-frame grasp schedule for the whole-body controller.
+
+The object is a free body moved only by contact, so a hand holds it by pressing on it and by the
+friction that pressure allows. From the clip's hand-object contact labels and the reference object
+track this module plans, per control frame ``t`` and hand ``k``:
+
+* **which hand holds which object.** A hand *grasps* object ``o`` on frames where its contact label
+  is set (runs shorter than :attr:`GraspConfig.min_run` dropped), both hands' labels are set, ``o``
+  is the free object nearest both hands and the hands face each other across it (inward normals
+  ``n_l . n_r <= -``:attr:`GraspConfig.min_opposition`). Other contacts are left to the reference.
+* **where the hand goes: a squeeze.** At the reference configuration (robot ``q_t``, object pose
+  ``X_t``) MuJoCo's ``mj_geomDistance`` gives the hand's contact surface's signed distance ``d_k`` to
+  the object and the nearest points; their direction is the inward surface normal ``n_k``. The two
+  normals are made exactly opposite, ``n = (n_l - n_r)/|n_l - n_r|``, ``n_l = n``, ``n_r = -n``, so the
+  squeezes cancel on the object. The tracked hand point ``c_k`` (its contact geom's centre, a fixed
+  point ``r_k`` of the hand body) gets the target ``c*_k = c_k + s(t) (d_k + delta) n_k``: the hand's
+  surface is driven ``delta`` (:attr:`GraspConfig.depth`) *into* the object, so the PD task presses
+  with a bounded force while the object blocks the hand; ``s(t)`` ramps 0 -> 1 over
+  :attr:`GraspConfig.ramp_frames` at each end of a grasp (close, release). Hand target velocity and
+  acceleration are the finite differences of ``c*``; the hand task weight is
+  :attr:`GraspConfig.w_hold` while grasping (the controller's own ``w_hand`` otherwise).
+* **the force the hands must apply.** With the reference object acceleration ``a_o`` (central
+  differences of its track) and ``lambda(t) = clip((z_o(t) - z_o(t_0)) / lift_blend, 0, 1)`` (0 while the
+  object still rests where the grasp started, 1 once the reference has lifted it), the hands must
+  carry ``F = lambda m (a_o + g e_z)``, half each: ``F_k = F/2``. Its part along the surface,
+  ``F_t,k = F_k - (F_k . n_k) n_k``, must come from friction: Coulomb's ``|F_t,k| <= mu N_k``, so the
+  normal (squeeze) force is ``N_k = clip(max(N_min, safety |F_t,k| / mu), 0, N_max)`` (``friction_ok``
+  records ``mu N_k >= |F_t,k|``). The hand pushes the object with ``f_k = s(t) (N_k n_k + F_k)``.
+  ``mu`` and ``condim`` of a hand-object contact follow MuJoCo's mixing rule (:func:`contact_friction`):
+  the geom with the higher ``priority`` decides, else the larger friction and condim; ``condim 1``
+  (frictionless) cannot hold anything and raises.
+
+The controller (:class:`physicalize.wbc.WholeBodyController`) adds ``-J_k^T f_k`` (the object's
+reaction at the hand point) to the measured external generalized force ``tau_ext`` -- so the QP's
+floating-base rows and torques carry the object's weight and inertia while the reference lifts it;
+with :attr:`GraspConfig.replace_measured` it first removes the measured contact forces of the held
+object on that whole forearm (:data:`physicalize.wbc.GRIP_LINKS`), whose one-step-old compensation
+would otherwise act as an integrator on the squeeze: a blocked hand is pushed by the last contact
+force plus ``M qdd*`` more at every step (measured: the box was dropped; the wrist capsules,
+compensated, pressed 30 N on its top edge and turned it). Contacts of other links stay measured.
+Optionally (:attr:`GraspConfig.w_hold_rot`) the grasping hands also track their reference
+orientation. Holding also needs the scene's elliptic friction cones with ``impratio`` 10
+(:mod:`pipeline.scene`): with pyramidal cones and ``impratio`` 1 a squeezed box crept down 2-3 cm/s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from pipeline.foot_contact import keep_runs
+from pipeline.scene import Scene, link_collision_geoms, nearest_geom_pair
+from physicalize.wbc import HAND_BODIES, Target
+
+GRAVITY = 9.81
+
+
+@dataclass(frozen=True)
+class GraspConfig:
+    """Grasp planning parameters (lengths in m, forces in N)."""
+
+    depth: float = 0.03  # target penetration of the hand surface into the object
+    safety: float = 2.0  # normal force = safety * tangential load / mu
+    min_normal_force: float = 10.0
+    max_normal_force: float = 60.0
+    min_run: int = 3  # frames: shorter contact-label runs are dropped
+    ramp_frames: int = 10  # squeeze/force ramp at the start and end of a grasp
+    lift_blend: float = 0.02  # object rise over which its weight moves onto the hands
+    min_opposition: float = 0.3  # grasp only if n_l . n_r <= -min_opposition
+    max_gap: float = 0.10  # a labelled hand farther than this from the object does not grasp
+    w_hold: float = 100.0  # hand task weight while grasping
+    w_free: float = 5.0  # hand task weight otherwise (the controller's default)
+    w_hold_rot: float = 0.0  # hand orientation task weight while grasping (0: posture only)
+    replace_measured: bool = True
+
+
+@dataclass
+class GraspSchedule:
+    """Per-frame hand targets and forces (``T`` frames, hands ordered left, right)."""
+
+    offset: np.ndarray  # (2, 3) tracked hand point in its hand body frame
+    point: np.ndarray  # (T, 2, 3) target of that point (world)
+    vel: np.ndarray  # (T, 2, 3)
+    acc: np.ndarray  # (T, 2, 3)
+    weight: np.ndarray  # (T, 2) hand task weight
+    force: np.ndarray  # (T, 2, 3) force each hand applies to the object (world)
+    normal: np.ndarray  # (T, 2, 3) inward surface normal at the hand (0 when not grasping)
+    grasped: np.ndarray  # (T, 2) bool
+    body: np.ndarray  # (T, 2) int: body id of the grasped object, -1 none
+    obj: np.ndarray  # (T,) int: index of the grasped object in the object list, -1 none
+    friction_ok: np.ndarray  # (T,) bool: mu N_k >= |F_t,k| for both hands (True when not grasping)
+    rot: np.ndarray  # (T, 2, 3, 3) reference hand orientations
+    rot_weight: np.ndarray  # (T, 2) hand orientation task weight (0 when not grasping)
+    mu: float
+    replace_measured: bool = True
+
+    def fill(self, target: Target, t: int) -> Target:
+        """Set ``target``'s hand fields to frame ``t`` of the schedule (in place; returned)."""
+        target.hand_pos, target.hand_vel, target.hand_acc = self.point[t], self.vel[t], self.acc[t]
+        target.hand_offset, target.hand_weight, target.hand_force = self.offset, self.weight[t], self.force[t]
+        target.hand_object = self.body[t] if self.replace_measured else np.full(2, -1)
+        target.hand_rot, target.hand_rot_weight = self.rot[t], self.rot_weight[t]
+        return target
+
+
+def contact_friction(model: mujoco.MjModel, g1: int, g2: int) -> tuple[int, float]:
+    """``(condim, mu)`` MuJoCo uses for a contact between geoms ``g1`` and ``g2``: those of the geom
+    with the higher ``priority``; at equal priority the larger condim and the larger sliding friction."""
+    p1, p2 = model.geom_priority[g1], model.geom_priority[g2]
+    if p1 != p2:
+        g = g1 if p1 > p2 else g2
+        return int(model.geom_condim[g]), float(model.geom_friction[g, 0])
+    return int(max(model.geom_condim[g1], model.geom_condim[g2])), float(max(model.geom_friction[g1, 0], model.geom_friction[g2, 0]))
+
+
+def hand_geoms(model: mujoco.MjModel) -> list[list[int]]:
+    """Collision geoms of each hand (left, right)."""
+    return [link_collision_geoms(model, b) for b in HAND_BODIES]
+
+
+def hand_offsets(model: mujoco.MjModel) -> np.ndarray:
+    """(2, 3) each hand's tracked point in its body frame: the mean centre of its own collision geoms."""
+    out = np.zeros((2, 3))
+    for k, geoms in enumerate(hand_geoms(model)):
+        own = [g for g in geoms if model.geom_bodyid[g] == model.body(HAND_BODIES[k]).id]
+        if own:
+            out[k] = model.geom_pos[own].mean(axis=0)
+    return out
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+def _ramp(mask: np.ndarray, n: int) -> np.ndarray:
+    """Per frame in [0, 1]: 0 off the mask, rising/falling linearly over ``n`` frames at each run end
+    inside the clip (a grasp the clip starts or ends with is held there at full strength)."""
+    s = np.zeros(len(mask))
+    big = len(mask) + n
+    for a, b in _runs(mask):
+        k = np.arange(b - a)
+        up = k + 1 if a > 0 else np.full(b - a, big)
+        down = b - a - k if b < len(mask) else np.full(b - a, big)
+        s[a:b] = np.minimum(1.0, np.minimum(up, down) / max(n, 1))
+    return s
+
+
+def normal_force(load: np.ndarray, n: np.ndarray, mu: float, cfg: GraspConfig) -> tuple[float, bool]:
+    """``(N, ok)``: squeeze force for a hand carrying ``load`` (3,) through a contact of inward
+    normal ``n`` and friction ``mu``; ``ok``: ``mu N >= |load_t|``."""
+    tangential = float(np.linalg.norm(load - (load @ n) * n))
+    N = float(np.clip(max(cfg.min_normal_force, cfg.safety * tangential / mu), 0.0, cfg.max_normal_force))
+    return N, mu * N >= tangential - 1e-9
+
+
+def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: np.ndarray | None, objects: dict[str, np.ndarray],
+                   cfg: GraspConfig = GraspConfig()) -> GraspSchedule | None:  # fmt: skip
+    """The schedule for reference ``ref`` (:class:`physicalize.reference.Reference`, ``T`` frames) from
+    the clip's contact labels ``contacts`` (T, len(contact_links)) and the reference object tracks
+    ``objects`` (name -> (T, 7) pose); ``None`` when no frame is a grasp (the reference is left as it is)."""
+    if contacts is None or not scene.object_qpos_adr:
+        return None
+    links = list(contact_links)
+    if not all(h in links for h in HAND_BODIES):
+        return None
+    m, T, fps = scene.model, ref.frames, ref.fps
+    labels = np.stack([keep_runs(keep_runs(np.asarray(contacts[:T, links.index(h)], bool), cfg.min_run, True), cfg.min_run, False)
+                       for h in HAND_BODIES], axis=1)  # fmt: skip
+    names = list(scene.object_qpos_adr)
+    obj_geoms = [[g for g in range(m.ngeom) if m.geom_contype[g] and m.geom_bodyid[g] == scene.object_body_id[n]] for n in names]
+    hgeoms = hand_geoms(m)
+    hand_ids = [m.body(b).id for b in HAND_BODIES]
+    offset = hand_offsets(m)
+    d = mujoco.MjData(m)
+    centre, rot = np.zeros((T, 2, 3)), np.zeros((T, 2, 3, 3))
+    normal, gap = np.zeros((T, 2, 3)), np.zeros((T, 2))
+    obj = np.full(T, -1)
+    fromto = np.zeros(6)
+    for t in range(T):
+        d.qpos[:36] = ref.qpos[t]
+        for n in names:
+            adr = scene.object_qpos_adr[n]
+            d.qpos[adr : adr + 7] = objects[n][t]
+        mujoco.mj_kinematics(m, d)
+        for k in range(2):
+            rot[t, k] = d.xmat[hand_ids[k]].reshape(3, 3)
+            centre[t, k] = d.xpos[hand_ids[k]] + rot[t, k] @ offset[k]
+        if not labels[t].all():
+            continue
+        best = None
+        for i, og in enumerate(obj_geoms):
+            hits = []
+            for k in range(2):
+                dist, _, _ = nearest_geom_pair(m, d, hgeoms[k], og, cfg.max_gap, fromto)
+                if dist >= cfg.max_gap:
+                    break
+                v = (fromto[3:] - fromto[:3]) * (1.0 if dist >= 0 else -1.0)
+                nv = np.linalg.norm(v)
+                hits.append((dist, v / nv if nv > 1e-6 else (d.xipos[scene.object_body_id[names[i]]] - centre[t, k])))
+            if len(hits) == 2 and (best is None or hits[0][0] + hits[1][0] < best[0]):
+                best = (hits[0][0] + hits[1][0], i, hits)
+        if best is None:
+            continue
+        (dl, nl), (dr, nr) = best[2]
+        nl, nr = nl / np.linalg.norm(nl), nr / np.linalg.norm(nr)
+        if nl @ nr > -cfg.min_opposition:
+            continue
+        n = (nl - nr) / np.linalg.norm(nl - nr)
+        obj[t], normal[t], gap[t] = best[1], (n, -n), (dl, dr)
+    grasped = obj >= 0
+    grasped = keep_runs(grasped, cfg.min_run, True)
+    obj[~grasped] = -1
+    s = _ramp(grasped, cfg.ramp_frames)
+    point = centre + (s[:, None] * (gap + cfg.depth))[..., None] * normal
+    dt = 1.0 / fps
+    vel = np.gradient(point, dt, axis=0) if T > 1 else np.zeros_like(point)
+    acc = np.gradient(vel, dt, axis=0) if T > 2 else np.zeros_like(point)
+    force = np.zeros((T, 2, 3))
+    friction_ok = np.ones(T, bool)
+    body = np.full((T, 2), -1)
+    mu = np.inf
+    for a, b in _runs(grasped):
+        i = int(obj[a])
+        name = names[i]
+        bid = scene.object_body_id[name]
+        for k in range(2):
+            for hg in hgeoms[k]:
+                for og in obj_geoms[i]:
+                    condim, f = contact_friction(m, hg, og)
+                    if condim < 3 or f <= 0:
+                        raise ValueError(f"hand geom {m.geom(hg).name!r} on {name!r}: condim {condim}, friction {f}: a frictionless contact cannot hold")
+                    mu = min(mu, f)
+        mass = float(m.body_subtreemass[bid])
+        pos = objects[name][:T, :3]
+        a_o = np.gradient(np.gradient(pos, dt, axis=0), dt, axis=0) if T > 2 else np.zeros_like(pos)
+        lam = np.clip((pos[:, 2] - pos[a, 2]) / cfg.lift_blend, 0.0, 1.0)
+        for t in range(a, b):
+            share = 0.5 * lam[t] * mass * (a_o[t] + [0.0, 0.0, GRAVITY])
+            for k in range(2):
+                N, ok = normal_force(share, normal[t, k], mu, cfg)
+                force[t, k] = s[t] * (N * normal[t, k] + share)
+                friction_ok[t] &= ok
+            body[t] = bid
+    weight = np.repeat((cfg.w_free + s * (cfg.w_hold - cfg.w_free))[:, None], 2, axis=1)
+    if not grasped.any():
+        return None
+    return GraspSchedule(offset, point, vel, acc, weight, force, normal, np.repeat(grasped[:, None], 2, 1), body, obj, friction_ok,
+                         rot, np.repeat((s * cfg.w_hold_rot)[:, None], 2, 1), float(mu), cfg.replace_measured)  # fmt: skip
