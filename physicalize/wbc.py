@@ -31,7 +31,7 @@ import mujoco
 import numpy as np
 from qpsolvers import solve_qp
 
-from pipeline.robot import NUM_JOINTS, ActuatorProfile
+from pipeline.robot import G1_JOINT_NAMES, NUM_JOINTS, ActuatorProfile
 
 NV_ROBOT = 6 + NUM_JOINTS
 FOOT_BODIES = ("left_ankle_roll_link", "right_ankle_roll_link")
@@ -64,6 +64,11 @@ class WBCConfig:
     w_posture: float = 1.0
     w_qdd: float = 1e-4
     w_force: float = 1e-5
+    joint_limits: bool = True  # the joint-range rows below (False: the QP knows no joint range)
+    limit_rate: float = 15.0  # alpha [1/s] of the joint-range barrier (see WholeBodyController.limit_bounds)
+    limit_margin: float = 0.01  # the barrier keeps joints this far [rad] inside their MuJoCo range
+    limit_active: float = 300.0  # a range row enters the QP when its bound on |qdd| is under this [rad/s^2]
+    w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
 
 
 @dataclass
@@ -148,6 +153,7 @@ class WholeBodyController:
         self.robot_geoms = {g for g in range(model.ngeom) if model.geom_bodyid[g] in set(self.robot_bodies)}
         self.floor = model.geom("floor").id
         self.effort = profile.effort_limit
+        self.q_lo, self.q_hi = model.jnt_range[[model.joint(j).id for j in G1_JOINT_NAMES]].T.copy()
         self._M = np.zeros((model.nv, model.nv))
         self._jp, self._jr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
 
@@ -282,14 +288,43 @@ class WholeBodyController:
         ta = h[6:] - tau_ext[6:]
         G += [Tq, -Tq]
         hv += [self.effort - ta, self.effort + ta]
-        x = solve_qp(P, q, np.vstack(G), np.concatenate(hv), A, b, solver="daqp")
+        G, hv = np.vstack(G), np.concatenate(hv)
+        b_lo, b_hi = self.limit_bounds(qj, qdj)
+        low, high = np.flatnonzero(b_lo > -cfg.limit_active), np.flatnonzero(b_hi < cfg.limit_active)
+        ns = (low.size + high.size) * cfg.joint_limits
+        if ns:  # joint-range rows  -qdd_j - s <= -b_lo,j  and  qdd_j - s <= b_hi,j  with slack s >= 0
+            Gl = np.zeros((2 * ns, n + ns))
+            Gl[np.arange(low.size), 6 + low] = -1.0
+            Gl[low.size + np.arange(high.size), 6 + high] = 1.0
+            Gl[:ns, n:] = -np.eye(ns)
+            Gl[ns:, n:] = -np.eye(ns)
+            G = np.vstack([np.hstack([G, np.zeros((G.shape[0], ns))]), Gl])
+            hv = np.concatenate([hv, -b_lo[low], b_hi[high], np.zeros(ns)])
+            P = np.block([[P, np.zeros((n, ns))], [np.zeros((ns, n)), cfg.w_limit_slack * np.eye(ns)]])
+            q = np.concatenate([q, np.zeros(ns)])
+            A = np.hstack([A, np.zeros((A.shape[0], ns))])
+        x = solve_qp(P, q, G, hv, A, b, solver="daqp")
         ok = x is not None
+        if ok:
+            x = x[:n]
         if not ok:  # fall back to the posture PD with gravity compensation of the current state
             x = np.zeros(n)
             x[6:nv] = cfg.posture_kp * (target.qpos[7:] - qj) - cfg.posture_kd * qdj
         qdd, f = x[:nv], x[nv:]
         tau = np.clip(Tq @ x + ta, -self.effort, self.effort)
         return Solution(qdd, f.reshape(-1, 3), tau, self.action(d, qdd, tau), ok)
+
+    def limit_bounds(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joint-acceleration bounds ``b_lo <= qdd <= b_hi`` (29,) that keep each joint inside its range.
+
+        With ``l = q_lo + m`` (``m`` = ``limit_margin``) the distance ``h = q - l`` obeys the second-order
+        barrier ``hdd + 2 a hd + a^2 h >= 0`` (``a`` = ``limit_rate``): a critically damped approach that
+        never crosses ``h = 0`` from ``h >= 0, hd + a h >= 0`` and pulls a joint already past ``l`` back
+        with the same dynamics. So ``qdd >= -2 a qd - a^2 (q - l)``, and symmetrically at the upper end.
+        Far from a limit the bound is far below what any task asks and the row is left out of the QP."""
+        a = self.cfg.limit_rate
+        lo, hi = self.q_lo + self.cfg.limit_margin, self.q_hi - self.cfg.limit_margin
+        return -2 * a * qd - a * a * (q - lo), -2 * a * qd - a * a * (q - hi)
 
     @staticmethod
     def _ref_rotation(target: Target, which: int) -> np.ndarray:
