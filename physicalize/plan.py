@@ -2,9 +2,12 @@
 schedule, by ZMP preview control (Kajita et al., ICRA 2003).
 
 The ZMP reference at each frame is the kinematic CoM's ground projection clipped into the
-support polygon of the stance feet (the convex hull of their sole corners, shrunk by
-:data:`MARGIN`): where the human's balance was already feasible the plan keeps it, in single
-support the ZMP is pulled onto the stance foot. The cart-table model
+support polygon of the stance feet (the convex hull of their sole corners): in double support
+the polygon shrunk by :data:`MARGIN`, where the human's balance was already feasible the plan
+keeps it; in single support the stance foot's polygon scaled by :data:`SINGLE_SUPPORT_SCALE`
+about its centre, so the ZMP is pulled onto the middle of the foot and the tracker keeps room to
+move the CoP for feedback (clipping to the foot's edge left none: the robot fell behind its plan
+in every single support). The cart-table model
 
     x_{k+1} = A x_k + B u_k,   x = (c, c_dot, c_ddot) per horizontal axis,  u = jerk,
     p_k = C x_k = c - (z_c / g) c_ddot
@@ -27,6 +30,7 @@ from physicalize.reference import Reference
 
 GRAVITY = 9.81
 MARGIN = 0.015
+SINGLE_SUPPORT_SCALE = 0.3  # single-support ZMP within this fraction of the foot about its centre
 PREVIEW_S = 1.6
 PREROLL_S = 3.2
 
@@ -80,9 +84,18 @@ def clip_to_polygon(p: np.ndarray, poly: np.ndarray, margin: float = MARGIN) -> 
     return best
 
 
-def zmp_reference(ref: Reference) -> np.ndarray:
-    """(T, 2) ZMP reference: the kinematic CoM projection clipped into each frame's support polygon."""
-    return np.array([clip_to_polygon(ref.com[t, :2], support_polygon(ref, t)) for t in range(ref.frames)])
+def zmp_reference(ref: Reference, single_support_scale: float = SINGLE_SUPPORT_SCALE) -> np.ndarray:
+    """(T, 2) ZMP reference: the kinematic CoM projection clipped into each frame's support polygon
+    (in single support, the polygon scaled by ``single_support_scale`` about its centre)."""
+    out = np.zeros((ref.frames, 2))
+    for t in range(ref.frames):
+        poly = support_polygon(ref, t)
+        if ref.stance[t].all():
+            out[t] = clip_to_polygon(ref.com[t, :2], poly)
+        else:
+            c = poly.mean(axis=0)
+            out[t] = clip_to_polygon(ref.com[t, :2], c + single_support_scale * (poly - c), 0.0)
+    return out
 
 
 def plan_com(ref: Reference) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -27,7 +27,7 @@ from pipeline.scene import Scene, link_collision_geoms
 
 SUBSTEPS = 4
 FALL_HEIGHT_DROP = 0.30  # pelvis this far below the reference's: fallen
-FALL_TILT_COS = 0.5  # torso up-axis z below this (60 degrees): fallen
+FALL_TILT_COS = 0.5  # torso up-axis this far (60 degrees) from the reference torso's up-axis: fallen
 
 
 @dataclass
@@ -65,9 +65,17 @@ def initial_state(scene: Scene, ref: Reference, objects: dict[str, np.ndarray]) 
     return qpos, qvel
 
 
-def fallen(d: mujoco.MjData, ref_pelvis_z: float, torso: int) -> bool:
-    """Pelvis :data:`FALL_HEIGHT_DROP` below the reference or torso tilted past 60 degrees."""
-    return bool(d.qpos[2] < ref_pelvis_z - FALL_HEIGHT_DROP or d.xmat[torso][8] < FALL_TILT_COS)
+def fallen(d: mujoco.MjData, ref_pelvis_z: float, torso: int, ref_torso_quat: np.ndarray | None = None) -> bool:
+    """Pelvis :data:`FALL_HEIGHT_DROP` below the reference, or the torso's up-axis more than 60 degrees
+    from the reference torso's (``ref_torso_quat``, wxyz; None: from the vertical). Relative tilt: a
+    reference that bends over a table or a box (> 60 degrees) is not a fall when tracked."""
+    up = d.xmat[torso].reshape(3, 3)[:, 2]
+    ref_up = np.array([0.0, 0.0, 1.0])
+    if ref_torso_quat is not None:
+        R = np.empty(9)
+        mujoco.mju_quat2Mat(R, ref_torso_quat)
+        ref_up = R.reshape(3, 3)[:, 2]
+    return bool(d.qpos[2] < ref_pelvis_z - FALL_HEIGHT_DROP or float(up @ ref_up) < FALL_TILT_COS)
 
 
 def _foot_forces(m, d, feet: list[int], floor: int) -> np.ndarray:
@@ -136,7 +144,7 @@ def simulate(scene: Scene, ref: Reference, controller: WholeBodyController, qpos
         rec["torque"].append(tau)
         rec["penetration"].append(max(pen, 0.0))
         rec["external_force"].append(ext)
-        if fell_at is None and fallen(d, ref.qpos[min(t + 1, T - 1), 2], torso):
+        if fell_at is None and fallen(d, ref.qpos[min(t + 1, T - 1), 2], torso, ref.torso_quat[min(t + 1, T - 1)]):
             fell_at = t + 1
             if stop_on_fall:
                 break

@@ -7,7 +7,7 @@ sole corners of each stance foot::
     min   sum_i w_i || J_i qdd + Jdot_i qd - a_i* ||^2  +  w_q ||qdd||^2  +  w_f ||f||^2
     s.t.  M_u qdd + h_u = J_{c,u}^T f + tau_ext,u              (floating base, 6 rows: no root actuation)
           J_foot qdd + Jdot_foot qd = a_foot*                   (stance feet, 6 rows each)
-          |f_x|, |f_y| <= mu f_z,  f_z >= 0                    (linearised friction cones per corner)
+          |f_x|, |f_y| <= mu f_z / sqrt 2,  f_z >= 0           (friction pyramids inscribed in the cones per corner)
           -tau_max <= M_a qdd + h_a - J_{c,a}^T f - tau_ext,a <= tau_max
 
 ``M`` and ``h = qfrc_bias - qfrc_passive`` come from the simulation's own model (so the held
@@ -25,7 +25,7 @@ clipped to the joint range (the actuators clip torque, the joints have their lim
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import mujoco
 import numpy as np
@@ -54,9 +54,11 @@ class WBCConfig:
     hand_kd: float = 20.0
     posture_kp: float = 100.0
     posture_kd: float = 20.0
+    swing_ff: float = 1.0  # feed-forward of the reference swing-foot acceleration
     stance_kv: float = 20.0
     stance_flat_kp: float = 100.0
     w_com: float = 1000.0
+    com_z_weight: float = 1.0  # the CoM height task's weight relative to the horizontal ones
     w_pelvis: float = 20.0
     w_torso: float = 10.0
     w_swing: float = 100.0
@@ -69,6 +71,15 @@ class WBCConfig:
     limit_margin: float = 0.01  # the barrier keeps joints this far [rad] inside their MuJoCo range
     limit_active: float = 300.0  # a range row enters the QP when its bound on |qdd| is under this [rad/s^2]
     w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
+    # contact state from the simulation
+    contact_stance: bool = True
+    touch_force: float = 20.0  # N: a foot pressing the floor this hard is in contact
+    touchdown_height: float = 0.02  # m: a swing foot in contact whose reference sole is this low and not rising has landed
+    descend_speed: float = 0.3  # m/s: a stance foot not yet on the floor is driven down at this speed
+    # capture-point (DCM) step adjustment of the swing foot's landing point
+    step_gain: float = 1.0  # landing point shift per metre of DCM error
+    step_max: float = 0.12  # m, largest shift
+    min_foot_gap: float = 0.14  # m, least lateral distance of the swing foot from the stance foot (no crossing)
 
 
 @dataclass
@@ -85,6 +96,8 @@ class Target:
     foot_pos: np.ndarray  # (2, 3) foot body origins
     foot_quat: np.ndarray  # (2, 4)
     foot_vel: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
+    foot_acc: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
+    sole_height: np.ndarray | None = None  # (2,) the reference soles' height above the floor (for touchdown)
     hand_pos: np.ndarray | None = None  # (2, 3), None: hands follow the posture only
     torso_quat: np.ndarray | None = None  # (4,), None: the pelvis orientation
 
@@ -206,6 +219,7 @@ class WholeBodyController:
         """One control step from the current state ``d`` (after ``mj_forward``)."""
         m, cfg = self.m, self.cfg
         nv = NV_ROBOT
+        target = self._adapt(d, target) if cfg.contact_stance else target
         stance = [k for k in range(2) if target.stance[k]]
         nf = 12 * len(stance)
         n = nv + nf
@@ -218,13 +232,14 @@ class WholeBodyController:
         P = np.zeros((n, n))
         q = np.zeros(n)
 
-        def task(J: np.ndarray, b: np.ndarray, w: float) -> None:
-            P[:nv, :nv] += w * J.T @ J
-            q[:nv] -= w * J.T @ b
+        def task(J: np.ndarray, b: np.ndarray, w) -> None:
+            w = np.broadcast_to(np.asarray(w, dtype=float), b.shape)[:, None]
+            P[:nv, :nv] += J.T @ (w * J)
+            q[:nv] -= J.T @ (w[:, 0] * b)
 
         c, Jc, bc, cd = self.com(d)
         kp, kd = np.array(cfg.com_kp), np.array(cfg.com_kd)
-        task(Jc, target.com_acc + kp * (target.com - c) + kd * (target.com_vel - cd) - bc, cfg.w_com)
+        task(Jc, target.com_acc + kp * (target.com - c) + kd * (target.com_vel - cd) - bc, (cfg.w_com, cfg.w_com, cfg.w_com * cfg.com_z_weight))
         for body, w, bid in ((self.pelvis, cfg.w_pelvis, 0), (self.torso, cfg.w_torso, 1)):
             Rref = self._ref_rotation(target, bid)
             _, Jr, _, br = self._jac(d, body, d.xpos[body])
@@ -245,7 +260,7 @@ class WholeBodyController:
             else:
                 ep = target.foot_pos[k] - d.xpos[fb]
                 er = orientation_error(_quat_mat(target.foot_quat[k]), R)
-                a = np.concatenate([cfg.foot_kp * ep + cfg.foot_kd * (target.foot_vel[k] - v6[:3]), cfg.orient_kp * er - cfg.orient_kd * v6[3:]])
+                a = np.concatenate([cfg.swing_ff * target.foot_acc[k] + cfg.foot_kp * ep + cfg.foot_kd * (target.foot_vel[k] - v6[:3]), cfg.orient_kp * er - cfg.orient_kd * v6[3:]])
                 task(J6, a - b6, cfg.w_swing)
         if target.hand_pos is not None:
             for k in range(2):
@@ -277,7 +292,8 @@ class WholeBodyController:
         A, b = np.vstack(A), np.concatenate(b)
         G, hv = [], []
         nc = nf // 3
-        cone = np.array([[1, 0, -cfg.mu], [-1, 0, -cfg.mu], [0, 1, -cfg.mu], [0, -1, -cfg.mu], [0, 0, -1.0]])
+        mu = cfg.mu / np.sqrt(2.0)  # the pyramid inscribed in the cone: |f_t| <= mu f_z in every direction
+        cone = np.array([[1, 0, -mu], [-1, 0, -mu], [0, 1, -mu], [0, -1, -mu], [0, 0, -1.0]])
         if nc:
             Gc = np.zeros((5 * nc, n))
             for j in range(nc):
@@ -325,6 +341,67 @@ class WholeBodyController:
         a = self.cfg.limit_rate
         lo, hi = self.q_lo + self.cfg.limit_margin, self.q_hi - self.cfg.limit_margin
         return -2 * a * qd - a * a * (q - lo), -2 * a * qd - a * a * (q - hi)
+
+    def foot_contact_forces(self, d) -> np.ndarray:
+        """(2,) normal force of the floor on each foot, measured in the simulation [N]."""
+        out, f6 = np.zeros(2), np.zeros(6)
+        for i in range(d.ncon):
+            c = d.contact[i]
+            if self.floor not in (c.geom1, c.geom2):
+                continue
+            b = self.m.geom_bodyid[c.geom2 if c.geom1 == self.floor else c.geom1]
+            if b in self.feet:
+                mujoco.mj_contactForce(self.m, d, i, f6)
+                out[self.feet.index(b)] += f6[0]
+        return out
+
+    def dcm_error(self, d, target: Target) -> np.ndarray:
+        """Horizontal divergent-component-of-motion error ``xi - xi_ref`` with ``xi = c + c_dot / omega``,
+        ``omega = sqrt(g / z_c)`` (``z_c``: the target CoM height)."""
+        c, _, _, cd = self.com(d)
+        omega = np.sqrt(9.81 / max(float(target.com[2]), 0.3))
+        return (c[:2] + cd[:2] / omega) - (target.com[:2] + target.com_vel[:2] / omega)
+
+    def _adapt(self, d, target: Target) -> Target:
+        """The target with its support taken from the simulation and the swing foot's landing point
+        moved by the capture-point error:
+
+        * a scheduled stance foot that does not press the floor (< ``touch_force``) while the other
+          foot supports becomes a swing foot driven down onto its footstep (late touchdown);
+        * a scheduled swing foot pressing the floor whose reference sole is low (< ``touchdown_height``)
+          and not rising becomes a stance foot (early touchdown);
+        * a swing foot's target moves horizontally by ``step_gain (xi - xi_ref)`` (at most ``step_max``,
+          never closer than ``min_foot_gap`` sideways to the stance foot): where the robot's DCM runs
+          ahead of or beside the plan, the foot lands where the DCM can be caught."""
+        cfg = self.cfg
+        force = self.foot_contact_forces(d)
+        on = force > cfg.touch_force
+        stance = list(target.stance)
+        pos, vel, acc = target.foot_pos.copy(), target.foot_vel.copy(), target.foot_acc.copy()
+        sole = target.sole_height if target.sole_height is not None else np.full(2, np.inf)
+        for k in range(2):
+            if not stance[k] and on[k] and sole[k] < cfg.touchdown_height and target.foot_vel[k, 2] <= 0.0:
+                stance[k] = True
+        for k in range(2):
+            if stance[k] and not on[k] and stance[1 - k] and on[1 - k]:
+                stance[k] = False
+                vel[k, 2], acc[k] = -cfg.descend_speed, 0.0
+                pos[k, 2] = min(pos[k, 2], d.xpos[self.feet[k]][2]) - cfg.descend_speed * CONTROL_DT
+        if stance.count(True) == 1 and cfg.step_gain > 0:
+            s, k = stance.index(True), stance.index(False)
+            shift = cfg.step_gain * self.dcm_error(d, target)
+            n = np.linalg.norm(shift)
+            if n > cfg.step_max:
+                shift *= cfg.step_max / n
+            p = pos[k, :2] + shift
+            R = d.xmat[self.feet[s]].reshape(3, 3)
+            lateral = np.array([-R[1, 0], R[0, 0]]) / max(np.hypot(R[0, 0], R[1, 0]), 1e-9)  # the stance foot's left
+            side = 1.0 if k == 0 else -1.0
+            gap = side * lateral @ (p - d.xpos[self.feet[s]][:2])
+            if gap < cfg.min_foot_gap:
+                p += side * (cfg.min_foot_gap - gap) * lateral
+            pos[k, :2] = p
+        return replace(target, stance=(stance[0], stance[1]), foot_pos=pos, foot_vel=vel, foot_acc=acc)
 
     @staticmethod
     def _ref_rotation(target: Target, which: int) -> np.ndarray:
