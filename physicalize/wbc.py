@@ -68,7 +68,9 @@ class WBCConfig:
     w_force: float = 1e-5
     joint_limits: bool = True  # the joint-range rows below (False: the QP knows no joint range)
     limit_rate: float = 15.0  # alpha [1/s] of the joint-range barrier (see WholeBodyController.limit_bounds)
+    limit_zeta: float = 1.0  # damping ratio of the barrier (1: critically damped)
     limit_margin: float = 0.01  # the barrier keeps joints this far [rad] inside their MuJoCo range
+    limit_stance_legs: bool = True  # range rows also on the joints of a stance leg (else swing legs, waist, arms)
     limit_active: float = 300.0  # a range row enters the QP when its bound on |qdd| is under this [rad/s^2]
     w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
     # contact state from the simulation
@@ -306,7 +308,11 @@ class WholeBodyController:
         hv += [self.effort - ta, self.effort + ta]
         G, hv = np.vstack(G), np.concatenate(hv)
         b_lo, b_hi = self.limit_bounds(qj, qdj)
-        low, high = np.flatnonzero(b_lo > -cfg.limit_active), np.flatnonzero(b_hi < cfg.limit_active)
+        rows = np.ones(NUM_JOINTS, bool)
+        if not cfg.limit_stance_legs:
+            for k in stance:
+                rows[6 * k : 6 * k + 6] = False
+        low, high = np.flatnonzero(rows & (b_lo > -cfg.limit_active)), np.flatnonzero(rows & (b_hi < cfg.limit_active))
         ns = (low.size + high.size) * cfg.joint_limits
         if ns:  # joint-range rows  -qdd_j - s <= -b_lo,j  and  qdd_j - s <= b_hi,j  with slack s >= 0
             Gl = np.zeros((2 * ns, n + ns))
@@ -334,13 +340,14 @@ class WholeBodyController:
         """Joint-acceleration bounds ``b_lo <= qdd <= b_hi`` (29,) that keep each joint inside its range.
 
         With ``l = q_lo + m`` (``m`` = ``limit_margin``) the distance ``h = q - l`` obeys the second-order
-        barrier ``hdd + 2 a hd + a^2 h >= 0`` (``a`` = ``limit_rate``): a critically damped approach that
-        never crosses ``h = 0`` from ``h >= 0, hd + a h >= 0`` and pulls a joint already past ``l`` back
-        with the same dynamics. So ``qdd >= -2 a qd - a^2 (q - l)``, and symmetrically at the upper end.
+        barrier ``hdd + 2 z a hd + a^2 h >= 0`` (``a`` = ``limit_rate``, ``z`` = ``limit_zeta``): with
+        ``z = 1`` a critically damped approach that never crosses ``h = 0`` from ``h >= 0, hd + a h >= 0``
+        and pulls a joint already past ``l`` back with the same dynamics (``z < 1`` brakes later and may
+        overshoot into the margin). So ``qdd >= -2 z a qd - a^2 (q - l)``, symmetrically at the upper end.
         Far from a limit the bound is far below what any task asks and the row is left out of the QP."""
-        a = self.cfg.limit_rate
+        a, c = self.cfg.limit_rate, 2 * self.cfg.limit_zeta * self.cfg.limit_rate
         lo, hi = self.q_lo + self.cfg.limit_margin, self.q_hi - self.cfg.limit_margin
-        return -2 * a * qd - a * a * (q - lo), -2 * a * qd - a * a * (q - hi)
+        return -c * qd - a * a * (q - lo), -c * qd - a * a * (q - hi)
 
     def foot_contact_forces(self, d) -> np.ndarray:
         """(2,) normal force of the floor on each foot, measured in the simulation [N]."""
