@@ -66,6 +66,7 @@ class WBCConfig:
     w_posture: float = 1.0
     w_qdd: float = 1e-4
     w_force: float = 1e-5
+    effort_scale: float = 1.0  # the QP's torque bounds as a fraction of the actuators' effort limits
     joint_limits: bool = True  # the joint-range rows below (False: the QP knows no joint range)
     limit_rate: float = 15.0  # alpha [1/s] of the joint-range barrier (see WholeBodyController.limit_bounds)
     limit_zeta: float = 1.0  # damping ratio of the barrier (1: critically damped)
@@ -305,7 +306,7 @@ class WholeBodyController:
         Tq = np.hstack([M[6:], -Jcorner[:, 6:].T])  # tau = Tq x + h_a - tau_ext_a
         ta = h[6:] - tau_ext[6:]
         G += [Tq, -Tq]
-        hv += [self.effort - ta, self.effort + ta]
+        hv += [cfg.effort_scale * self.effort - ta, cfg.effort_scale * self.effort + ta]
         G, hv = np.vstack(G), np.concatenate(hv)
         b_lo, b_hi = self.limit_bounds(qj, qdj)
         rows = np.ones(NUM_JOINTS, bool)
