@@ -73,6 +73,9 @@ class WBCConfig:
     limit_margin: float = 0.01  # the barrier keeps joints this far [rad] inside their MuJoCo range
     limit_stance_legs: bool = True  # range rows also on the joints of a stance leg (else swing legs, waist, arms)
     limit_active: float = 300.0  # a range row enters the QP when its bound on |qdd| is under this [rad/s^2]
+    touchdown_rate: float = 15.0  # a [1/s] of the swing-foot touchdown barrier (0: none; see soft_rows)
+    touchdown_depth: float = 0.015  # m below the floor that barrier aims at (0 would never touch down)
+    touchdown_zone: float = 0.10  # m: sole corners higher than this get no row
     w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
     # contact state from the simulation
     contact_stance: bool = True
@@ -308,21 +311,15 @@ class WholeBodyController:
         G += [Tq, -Tq]
         hv += [cfg.effort_scale * self.effort - ta, cfg.effort_scale * self.effort + ta]
         G, hv = np.vstack(G), np.concatenate(hv)
-        b_lo, b_hi = self.limit_bounds(qj, qdj)
-        rows = np.ones(NUM_JOINTS, bool)
-        if not cfg.limit_stance_legs:
-            for k in stance:
-                rows[6 * k : 6 * k + 6] = False
-        low, high = np.flatnonzero(rows & (b_lo > -cfg.limit_active)), np.flatnonzero(rows & (b_hi < cfg.limit_active))
-        ns = (low.size + high.size) * cfg.joint_limits
-        if ns:  # joint-range rows  -qdd_j - s <= -b_lo,j  and  qdd_j - s <= b_hi,j  with slack s >= 0
+        Gs, hs = self.soft_rows(d, target, stance)
+        ns = len(hs)
+        if ns:  # soft rows  Gs qdd - s <= hs  with slack s >= 0 (weight w_limit_slack): the QP stays feasible
             Gl = np.zeros((2 * ns, n + ns))
-            Gl[np.arange(low.size), 6 + low] = -1.0
-            Gl[low.size + np.arange(high.size), 6 + high] = 1.0
+            Gl[:ns, :nv] = Gs
             Gl[:ns, n:] = -np.eye(ns)
             Gl[ns:, n:] = -np.eye(ns)
             G = np.vstack([np.hstack([G, np.zeros((G.shape[0], ns))]), Gl])
-            hv = np.concatenate([hv, -b_lo[low], b_hi[high], np.zeros(ns)])
+            hv = np.concatenate([hv, hs, np.zeros(ns)])
             P = np.block([[P, np.zeros((n, ns))], [np.zeros((ns, n)), cfg.w_limit_slack * np.eye(ns)]])
             q = np.concatenate([q, np.zeros(ns)])
             A = np.hstack([A, np.zeros((A.shape[0], ns))])
@@ -336,6 +333,51 @@ class WholeBodyController:
         qdd, f = x[:nv], x[nv:]
         tau = np.clip(Tq @ x + ta, -self.effort, self.effort)
         return Solution(qdd, f.reshape(-1, 3), tau, self.action(d, qdd, tau), ok)
+
+    def soft_rows(self, d, target: Target, stance: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """Inequality rows ``G qdd <= h`` (``G`` (k, 35)) that the QP keeps with a slack:
+
+        * joint ranges: ``-qdd_j <= -b_lo,j`` and ``qdd_j <= b_hi,j`` (:meth:`limit_bounds`), for the
+          rows whose bound is within ``limit_active`` (the others cannot bind);
+        * swing-foot touchdown: each sole corner of a swing foot, height ``z`` above the floor, obeys the
+          same barrier towards ``z = -touchdown_depth``: ``zdd >= -2 a zd - a^2 (z + depth)`` with
+          ``zdd = J_z qdd + Jdot_z qd`` (``a`` = ``touchdown_rate``), so a foot lands at most at about
+          ``a depth`` m/s instead of being driven into the floor (the floor's soft contact let a
+          2 m/s strike sink the sole 3.5 cm).
+        """
+        cfg, nv = self.cfg, NV_ROBOT
+        Gs, hs = [], []
+        if cfg.joint_limits:
+            qj, qdj = d.qpos[7 : 7 + NUM_JOINTS], d.qvel[6:nv]
+            b_lo, b_hi = self.limit_bounds(qj, qdj)
+            rows = np.ones(NUM_JOINTS, bool)
+            if not cfg.limit_stance_legs:
+                for k in stance:
+                    rows[6 * k : 6 * k + 6] = False
+            for j in np.flatnonzero(rows & (b_lo > -cfg.limit_active)):
+                g = np.zeros(nv)
+                g[6 + j] = -1.0
+                Gs.append(g)
+                hs.append(-b_lo[j])
+            for j in np.flatnonzero(rows & (b_hi < cfg.limit_active)):
+                g = np.zeros(nv)
+                g[6 + j] = 1.0
+                Gs.append(g)
+                hs.append(b_hi[j])
+        if cfg.touchdown_rate > 0:
+            a = cfg.touchdown_rate
+            for k in (k for k in range(2) if k not in stance):
+                fb = self.feet[k]
+                R = d.xmat[fb].reshape(3, 3)
+                for p in self.corners[k]:
+                    pw = d.xpos[fb] + R @ p
+                    if pw[2] > cfg.touchdown_zone:
+                        continue
+                    jp, _, bp, _ = self._jac(d, fb, pw)
+                    bound = -2 * a * (jp[2] @ d.qvel[:nv]) - a * a * (pw[2] + cfg.touchdown_depth)
+                    Gs.append(-jp[2])
+                    hs.append(bp[2] - bound)
+        return np.array(Gs).reshape(-1, nv), np.array(hs)
 
     def limit_bounds(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Joint-acceleration bounds ``b_lo <= qdd <= b_hi`` (29,) that keep each joint inside its range.
