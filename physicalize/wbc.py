@@ -73,8 +73,9 @@ class WBCConfig:
     limit_margin: float = 0.01  # the barrier keeps joints this far [rad] inside their MuJoCo range
     limit_stance_legs: bool = True  # range rows also on the joints of a stance leg (else swing legs, waist, arms)
     limit_active: float = 300.0  # a range row enters the QP when its bound on |qdd| is under this [rad/s^2]
-    touchdown_rate: float = 15.0  # a [1/s] of the swing-foot touchdown barrier (0: none; see soft_rows)
+    touchdown_rate: float = 25.0  # a [1/s] of the swing-foot touchdown rows (0: none; see soft_rows)
     touchdown_depth: float = 0.015  # m below the floor that barrier aims at (0 would never touch down)
+    touchdown_speed: float = 0.5  # m/s: a descent-speed cap zdd >= -a (zd + speed); 0: the barrier towards -touchdown_depth
     touchdown_zone: float = 0.10  # m: sole corners higher than this get no row
     w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
     # contact state from the simulation
@@ -339,11 +340,12 @@ class WholeBodyController:
 
         * joint ranges: ``-qdd_j <= -b_lo,j`` and ``qdd_j <= b_hi,j`` (:meth:`limit_bounds`), for the
           rows whose bound is within ``limit_active`` (the others cannot bind);
-        * swing-foot touchdown: each sole corner of a swing foot, height ``z`` above the floor, obeys the
-          same barrier towards ``z = -touchdown_depth``: ``zdd >= -2 a zd - a^2 (z + depth)`` with
-          ``zdd = J_z qdd + Jdot_z qd`` (``a`` = ``touchdown_rate``), so a foot lands at most at about
-          ``a depth`` m/s instead of being driven into the floor (the floor's soft contact let a
-          2 m/s strike sink the sole 3.5 cm).
+        * swing-foot touchdown: each sole corner of a swing foot lower than ``touchdown_zone``, height
+          ``z`` and vertical speed ``zd`` (``zdd = J_z qdd + Jdot_z qd``), descends at most at
+          ``v = touchdown_speed``: ``zdd >= -a (zd + v)`` (``a`` = ``touchdown_rate``), so a foot is not
+          driven into the floor (the floor's soft contact let a 2 m/s strike sink the sole 3.5 cm).
+          With ``touchdown_speed = 0`` the row is instead the joint-range barrier towards
+          ``z = -touchdown_depth``: ``zdd >= -2 a zd - a^2 (z + depth)`` (measured: it delays landings).
         """
         cfg, nv = self.cfg, NV_ROBOT
         Gs, hs = [], []
@@ -374,7 +376,11 @@ class WholeBodyController:
                     if pw[2] > cfg.touchdown_zone:
                         continue
                     jp, _, bp, _ = self._jac(d, fb, pw)
-                    bound = -2 * a * (jp[2] @ d.qvel[:nv]) - a * a * (pw[2] + cfg.touchdown_depth)
+                    zd = jp[2] @ d.qvel[:nv]
+                    if cfg.touchdown_speed > 0:  # a speed cap only: zdd >= -a (zd + v_max)
+                        bound = -a * (zd + cfg.touchdown_speed)
+                    else:
+                        bound = -2 * a * zd - a * a * (pw[2] + cfg.touchdown_depth)
                     Gs.append(-jp[2])
                     hs.append(bp[2] - bound)
         return np.array(Gs).reshape(-1, nv), np.array(hs)
