@@ -66,7 +66,7 @@ class WBCConfig:
     w_posture: float = 1.0
     w_qdd: float = 1e-4
     w_force: float = 1e-5
-    effort_scale: float = 1.0  # the QP's torque bounds as a fraction of the actuators' effort limits
+    effort_scale: float = 0.95  # the QP's torque bounds as a fraction of the actuators' effort limits (1.0: 31% of walk frames saturated)
     joint_limits: bool = True  # the joint-range rows below (False: the QP knows no joint range)
     limit_rate: float = 15.0  # alpha [1/s] of the joint-range barrier (see WholeBodyController.limit_bounds)
     limit_zeta: float = 1.0  # damping ratio of the barrier (1: critically damped)
