@@ -73,7 +73,7 @@ class WBCConfig:
     descend_speed: float = 0.3  # m/s: a stance foot not yet on the floor is driven down at this speed
     # capture-point (DCM) step adjustment of the swing foot's landing point
     step_gain: float = 1.0  # landing point shift per metre of DCM error
-    step_max: float = 0.12  # m, largest shift
+    step_max: float = 0.2  # m, largest shift
     min_foot_gap: float = 0.14  # m, least lateral distance of the swing foot from the stance foot (no crossing)
 
 
