@@ -5,8 +5,8 @@ per-step quantities the whole-body controller tracks, by forward kinematics of t
 * centre of mass ``com`` (the planner may replace it with a dynamically feasible one);
 * foot support schedule: a foot is in stance where its sole is within :data:`STANCE_HEIGHT` of
   the floor and moves slower than :data:`STANCE_SPEED` (the retargeter's pinned feet); on frames
-  where no foot is, every foot that low supports (heel-strike/toe-off: double support), else the
-  lower foot; runs shorter than 3 frames (60 ms) are merged into their neighbours;
+  where no foot is, every foot that low and slower than :data:`GAP_SPEED` supports (heel-strike/
+  toe-off: double support), else the lower foot; runs shorter than 3 frames (60 ms) are merged into their neighbours;
 * feet, hands and torso poses.
 """
 
@@ -24,6 +24,7 @@ from physicalize.wbc import FOOT_BODIES, HAND_BODIES, Target, sole_corners
 
 STANCE_HEIGHT = 0.03
 STANCE_SPEED = 0.1
+GAP_SPEED = 0.5  # m/s: between two stance runs a low foot moving slower than this supports (heel strike, toe-off)
 MIN_RUN = 3
 SMOOTH_S = 0.2  # s, window of the Savitzky-Golay filter of the tracked CoM and foot derivatives
 
@@ -117,7 +118,7 @@ def build_reference(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> Refe
     low = height < STANCE_HEIGHT
     stance = low & (speed < STANCE_SPEED)
     gap = ~stance.any(axis=1)  # between one foot's lift-off and the other's landing: every low foot supports
-    stance[gap] = low[gap]
+    stance[gap] = (low & (speed < GAP_SPEED))[gap]
     for k in range(2):
         stance[:, k] = keep_runs(keep_runs(stance[:, k], MIN_RUN, False), MIN_RUN, True)
     none = ~stance.any(axis=1)  # never plan a flight phase: the lower foot supports

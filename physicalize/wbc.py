@@ -88,7 +88,8 @@ class WBCConfig:
     descend_speed: float = 0.3  # m/s: a stance foot not yet on the floor is driven down at this speed
     # capture-point (DCM) step adjustment of the swing foot's landing point
     step_gain: float = 1.0  # landing point shift per metre of DCM error
-    step_max: float = 0.12  # m, largest shift
+    step_max: float = 0.2  # m, largest shift
+    com_anchor: float = 0.5  # the CoM target moves by this fraction of the stance feet's offset from their footsteps
     min_foot_gap: float = 0.14  # m, least lateral distance of the swing foot from the stance foot (no crossing)
 
 
@@ -178,6 +179,7 @@ class WholeBodyController:
         self.effort = profile.effort_limit
         self.q_lo, self.q_hi = model.jnt_range[[model.joint(j).id for j in G1_JOINT_NAMES]].T.copy()
         self._M = np.zeros((model.nv, model.nv))
+        self._landing_shift = np.zeros((2, 2))  # capture-point shift of each foot's last landing (controller state)
         self._jp, self._jr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
 
     # --- kinematics helpers ---------------------------------------------------------------------
@@ -386,7 +388,10 @@ class WholeBodyController:
           and not rising becomes a stance foot (early touchdown);
         * a swing foot's target moves horizontally by ``step_gain (xi - xi_ref)`` (at most ``step_max``,
           never closer than ``min_foot_gap`` sideways to the stance foot): where the robot's DCM runs
-          ahead of or beside the plan, the foot lands where the DCM can be caught."""
+          ahead of or beside the plan, the foot lands where the DCM can be caught;
+        * while a foot supports, the CoM target moves by ``com_anchor`` times the shift that foot landed
+          with (the plan follows the footholds taken: without it the plan kept pulling the CoM toward the
+          reference footsteps, the next landing was shifted further, and a 20 N side push diverged)."""
         cfg = self.cfg
         force = self.foot_contact_forces(d)
         on = force > cfg.touch_force
@@ -401,6 +406,14 @@ class WholeBodyController:
                 stance[k] = False
                 vel[k, 2], acc[k] = -cfg.descend_speed, 0.0
                 pos[k, 2] = min(pos[k, 2], d.xpos[self.feet[k]][2]) - cfg.descend_speed * CONTROL_DT
+        com = target.com
+        if cfg.com_anchor > 0 and any(stance):  # the plan follows the footholds actually taken
+            held = [k for k in range(2) if stance[k]]
+            if held:
+                off = np.mean([self._landing_shift[k] for k in held], axis=0)
+                com = target.com.copy()
+                com[:2] += cfg.com_anchor * off
+                target = replace(target, com=com)
         if stance.count(True) == 1 and cfg.step_gain > 0:
             s, k = stance.index(True), stance.index(False)
             shift = cfg.step_gain * self.dcm_error(d, target)
@@ -415,6 +428,9 @@ class WholeBodyController:
             if gap < cfg.min_foot_gap:
                 p += side * (cfg.min_foot_gap - gap) * lateral
             pos[k, :2] = p
+        for k in range(2):  # the step adjustment each foot landed with (kept while it supports)
+            if not stance[k]:
+                self._landing_shift[k] = pos[k, :2] - target.foot_pos[k, :2]
         return replace(target, stance=(stance[0], stance[1]), foot_pos=pos, foot_vel=vel, foot_acc=acc)
 
     @staticmethod
