@@ -3,8 +3,8 @@ schedule, by ZMP preview control (Kajita et al., ICRA 2003).
 
 The ZMP reference at each frame is the kinematic CoM's ground projection clipped into the
 support polygon of the stance feet (the convex hull of their sole corners): in double support
-the polygon shrunk by :data:`MARGIN`, where the human's balance was already feasible the plan
-keeps it; in single support the stance foot's polygon scaled by :data:`SINGLE_SUPPORT_SCALE`
+the polygon shrunk by :data:`MARGIN` (3 cm: room for the tracker's CoP feedback), where the
+human's balance was already feasible the plan keeps it; in single support the stance foot's polygon scaled by :data:`SINGLE_SUPPORT_SCALE`
 about its centre, so the ZMP is pulled onto the middle of the foot and the tracker keeps room to
 move the CoP for feedback (clipping to the foot's edge left none: the robot fell behind its plan
 in every single support). The cart-table model
@@ -29,7 +29,7 @@ from scipy.spatial import ConvexHull
 from physicalize.reference import Reference
 
 GRAVITY = 9.81
-MARGIN = 0.015
+MARGIN = 0.03
 SINGLE_SUPPORT_SCALE = 0.3  # single-support ZMP within this fraction of the foot about its centre
 PREVIEW_S = 1.6
 

@@ -110,7 +110,12 @@ def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "
         ref.com_plan, _, zmp = plan_com(ref)
     elif reference == "feasible":
         stats: dict = {}
-        ref = feasible_reference(scene.model, ref, plan_com, stats=stats)
+        m = scene.model
+        obj_q = np.repeat(m.qpos0[None, 36:], ref.frames, 0)
+        for o in (o for o in clip.objects if o.name in scene.object_qpos_adr):  # free objects; fixed ones are in the model
+            adr = scene.object_qpos_adr[o.name] - 36
+            obj_q[:, adr : adr + 7] = o.pose[: ref.frames]
+        ref = feasible_reference(m, ref, plan_com, stats=stats, objects=obj_q if clip.objects else None)
         zmp = stats["plan"][2]
     objects = {o.name: o.pose for o in clip.objects}
     if grasp:

@@ -8,7 +8,8 @@ sole corners of each stance foot::
     s.t.  M_u qdd + h_u = J_{c,u}^T f + tau_ext,u              (floating base, 6 rows: no root actuation)
           J_foot qdd + Jdot_foot qd = a_foot*                   (stance feet, 6 rows each)
           |f_x|, |f_y| <= mu f_z / sqrt 2,  f_z >= 0           (friction pyramids inscribed in the cones per corner)
-          -tau_max <= M_a qdd + h_a - J_{c,a}^T f - tau_ext,a <= tau_max
+          -e tau_max <= M_a qdd + h_a - J_{c,a}^T f - tau_ext,a <= e tau_max   (e = effort_scale, 0.95)
+          G qdd - s <= h,  s >= 0,  + w_s ||s||^2                 (soft rows: joint ranges, touchdown; wbc_rows)
 
 ``M`` and ``h = qfrc_bias - qfrc_passive`` come from the simulation's own model (so the held
 object's inertia is not in ``M``, but its measured contact forces on the robot are in
@@ -34,7 +35,8 @@ import mujoco
 import numpy as np
 from qpsolvers import solve_qp
 
-from pipeline.robot import NUM_JOINTS, ActuatorProfile
+from physicalize import wbc_rows
+from pipeline.robot import G1_JOINT_NAMES, NUM_JOINTS, ActuatorProfile
 from pipeline.scene import link_collision_geoms
 
 NV_ROBOT = 6 + NUM_JOINTS
@@ -71,6 +73,19 @@ class WBCConfig:
     w_posture: float = 1.0
     w_qdd: float = 1e-4
     w_force: float = 1e-5
+    corner_lift: float = 0.0  # m: > 0: a stance-foot sole corner this high above the floor gets f = 0 (not all four); 0.01 measured: walk penetration 0.030 -> 0.021 but SitStand fell at 395 of 471
+    effort_scale: float = 0.95  # the QP's torque bounds as a fraction of the actuators' effort limits (1.0: 31% of walk frames saturated)
+    joint_limits: bool = True  # the joint-range rows below (False: the QP knows no joint range)
+    limit_rate: float = 15.0  # alpha [1/s] of the joint-range barrier (see WholeBodyController.limit_bounds)
+    limit_zeta: float = 1.0  # damping ratio of the barrier (1: critically damped)
+    limit_margin: float = 0.01  # the barrier keeps joints this far [rad] inside their MuJoCo range
+    limit_stance_legs: bool = True  # range rows also on the joints of a stance leg (else swing legs, waist, arms)
+    limit_active: float = 300.0  # a range row enters the QP when its bound on |qdd| is under this [rad/s^2]
+    touchdown_rate: float = 25.0  # a [1/s] of the swing-foot touchdown rows (0: none; see soft_rows)
+    touchdown_depth: float = 0.015  # m below the floor that barrier aims at (0 would never touch down)
+    touchdown_speed: float = 0.8  # m/s (0.5 fell in test_gait's -y push while walking): a descent-speed cap zdd >= -a (zd + speed); 0: the barrier towards -touchdown_depth
+    touchdown_zone: float = 0.10  # m: sole corners higher than this get no row
+    w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
     # contact state from the simulation
     contact_stance: bool = True
     touch_force: float = 20.0  # N: a foot pressing the floor this hard is in contact
@@ -78,7 +93,8 @@ class WBCConfig:
     descend_speed: float = 0.3  # m/s: a stance foot not yet on the floor is driven down at this speed
     # capture-point (DCM) step adjustment of the swing foot's landing point
     step_gain: float = 1.0  # landing point shift per metre of DCM error
-    step_max: float = 0.12  # m, largest shift
+    step_max: float = 0.2  # m, largest shift
+    com_anchor: float = 0.5  # the CoM target moves by this fraction of the stance feet's offset from their footsteps
     min_foot_gap: float = 0.14  # m, least lateral distance of the swing foot from the stance foot (no crossing)
 
 
@@ -176,7 +192,9 @@ class WholeBodyController:
         self.robot_geoms = {g for g in range(model.ngeom) if model.geom_bodyid[g] in set(self.robot_bodies)}
         self.floor = model.geom("floor").id
         self.effort = profile.effort_limit
+        self.q_lo, self.q_hi = model.jnt_range[[model.joint(j).id for j in G1_JOINT_NAMES]].T.copy()
         self._M = np.zeros((model.nv, model.nv))
+        self._landing_shift = np.zeros((2, 2))  # capture-point shift of each foot's last landing (controller state)
         self._jp, self._jr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
 
     # --- kinematics helpers ---------------------------------------------------------------------
@@ -324,18 +342,51 @@ class WholeBodyController:
                 Gc[5 * j : 5 * j + 5, nv + 3 * j : nv + 3 * j + 3] = cone
             G.append(Gc)
             hv.append(np.zeros(5 * nc))
+            if cfg.corner_lift > 0:  # a stance corner clear of the floor in the simulation carries no force
+                for s_, k in enumerate(stance):
+                    fb = self.feet[k]
+                    z = d.xpos[fb][2] + (self.corners[k] @ d.xmat[fb].reshape(3, 3).T)[:, 2]
+                    lifted = np.flatnonzero(z > cfg.corner_lift)
+                    if 0 < lifted.size < 4:
+                        Gz = np.zeros((lifted.size, n))
+                        Gz[np.arange(lifted.size), nv + 12 * s_ + 3 * lifted + 2] = 1.0
+                        G.append(Gz)
+                        hv.append(np.zeros(lifted.size))
         Tq = np.hstack([M[6:], -Jcorner[:, 6:].T])  # tau = Tq x + h_a - tau_ext_a
         ta = h[6:] - tau_ext[6:]
         G += [Tq, -Tq]
-        hv += [self.effort - ta, self.effort + ta]
-        x = solve_qp(P, q, np.vstack(G), np.concatenate(hv), A, b, solver="daqp")
+        hv += [cfg.effort_scale * self.effort - ta, cfg.effort_scale * self.effort + ta]
+        G, hv = np.vstack(G), np.concatenate(hv)
+        Gs, hs = self.soft_rows(d, target, stance)
+        ns = len(hs)
+        if ns:  # soft rows  Gs qdd - s <= hs  with slack s >= 0 (weight w_limit_slack): the QP stays feasible
+            Gl = np.zeros((2 * ns, n + ns))
+            Gl[:ns, :nv] = Gs
+            Gl[:ns, n:] = -np.eye(ns)
+            Gl[ns:, n:] = -np.eye(ns)
+            G = np.vstack([np.hstack([G, np.zeros((G.shape[0], ns))]), Gl])
+            hv = np.concatenate([hv, hs, np.zeros(ns)])
+            P = np.block([[P, np.zeros((n, ns))], [np.zeros((ns, n)), cfg.w_limit_slack * np.eye(ns)]])
+            q = np.concatenate([q, np.zeros(ns)])
+            A = np.hstack([A, np.zeros((A.shape[0], ns))])
+        x = solve_qp(P, q, G, hv, A, b, solver="daqp")
         ok = x is not None
+        if ok:
+            x = x[:n]
         if not ok:  # fall back to the posture PD with gravity compensation of the current state
             x = np.zeros(n)
             x[6:nv] = cfg.posture_kp * (target.qpos[7:] - qj) - cfg.posture_kd * qdj
         qdd, f = x[:nv], x[nv:]
         tau = np.clip(Tq @ x + ta, -self.effort, self.effort)
         return Solution(qdd, f.reshape(-1, 3), tau, self.action(d, qdd, tau), ok)
+
+    def soft_rows(self, d, target: Target, stance: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """Joint-range and touchdown rows ``G qdd <= h`` kept with a slack (:func:`physicalize.wbc_rows.soft_rows`)."""
+        return wbc_rows.soft_rows(self, d, target, stance)
+
+    def limit_bounds(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joint-acceleration bounds ``b_lo <= qdd <= b_hi`` (:func:`physicalize.wbc_rows.limit_bounds`)."""
+        return wbc_rows.limit_bounds(self, q, qd)
 
     def foot_contact_forces(self, d) -> np.ndarray:
         """(2,) normal force of the floor on each foot, measured in the simulation [N]."""
@@ -367,7 +418,10 @@ class WholeBodyController:
           and not rising becomes a stance foot (early touchdown);
         * a swing foot's target moves horizontally by ``step_gain (xi - xi_ref)`` (at most ``step_max``,
           never closer than ``min_foot_gap`` sideways to the stance foot): where the robot's DCM runs
-          ahead of or beside the plan, the foot lands where the DCM can be caught."""
+          ahead of or beside the plan, the foot lands where the DCM can be caught;
+        * while a foot supports, the CoM target moves by ``com_anchor`` times the shift that foot landed
+          with (the plan follows the footholds taken: without it the plan kept pulling the CoM toward the
+          reference footsteps, the next landing was shifted further, and a 20 N side push diverged)."""
         cfg = self.cfg
         force = self.foot_contact_forces(d)
         on = force > cfg.touch_force
@@ -382,6 +436,14 @@ class WholeBodyController:
                 stance[k] = False
                 vel[k, 2], acc[k] = -cfg.descend_speed, 0.0
                 pos[k, 2] = min(pos[k, 2], d.xpos[self.feet[k]][2]) - cfg.descend_speed * CONTROL_DT
+        com = target.com
+        if cfg.com_anchor > 0 and any(stance):  # the plan follows the footholds actually taken
+            held = [k for k in range(2) if stance[k]]
+            if held:
+                off = np.mean([self._landing_shift[k] for k in held], axis=0)
+                com = target.com.copy()
+                com[:2] += cfg.com_anchor * off
+                target = replace(target, com=com)
         if stance.count(True) == 1 and cfg.step_gain > 0:
             s, k = stance.index(True), stance.index(False)
             shift = cfg.step_gain * self.dcm_error(d, target)
@@ -396,6 +458,9 @@ class WholeBodyController:
             if gap < cfg.min_foot_gap:
                 p += side * (cfg.min_foot_gap - gap) * lateral
             pos[k, :2] = p
+        for k in range(2):  # the step adjustment each foot landed with (kept while it supports)
+            if not stance[k]:
+                self._landing_shift[k] = pos[k, :2] - target.foot_pos[k, :2]
         return replace(target, stance=(stance[0], stance[1]), foot_pos=pos, foot_vel=vel, foot_acc=acc)
 
     @staticmethod

@@ -1,0 +1,77 @@
+"""The whole-body QP's soft inequality rows (:meth:`physicalize.wbc.WholeBodyController.soft_rows`):
+joint-range barriers and swing-foot touchdown speed caps, ``G qdd <= h``, each kept with a slack
+``s >= 0`` of weight ``w_limit_slack`` so that the QP stays feasible where a row cannot hold
+(``G qdd - s <= h``). ``ctrl`` is the :class:`~physicalize.wbc.WholeBodyController`."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.robot import NUM_JOINTS
+
+NV_ROBOT = 6 + NUM_JOINTS
+
+
+def soft_rows(ctrl, d, target, stance: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Inequality rows ``G qdd <= h`` (``G`` (k, 35)) that the QP keeps with a slack:
+
+    * joint ranges: ``-qdd_j <= -b_lo,j`` and ``qdd_j <= b_hi,j`` (:meth:`limit_bounds`), for the
+      rows whose bound is within ``limit_active`` (the others cannot bind);
+    * swing-foot touchdown: each sole corner of a swing foot lower than ``touchdown_zone``, height
+      ``z`` and vertical speed ``zd`` (``zdd = J_z qdd + Jdot_z qd``), descends at most at
+      ``v = touchdown_speed``: ``zdd >= -a (zd + v)`` (``a`` = ``touchdown_rate``), so a foot is not
+      driven into the floor (the floor's soft contact let a 2 m/s strike sink the sole 3.5 cm).
+      With ``touchdown_speed = 0`` the row is instead the joint-range barrier towards
+      ``z = -touchdown_depth``: ``zdd >= -2 a zd - a^2 (z + depth)`` (measured: it delays landings).
+    """
+    cfg, nv = ctrl.cfg, NV_ROBOT
+    Gs, hs = [], []
+    if cfg.joint_limits:
+        qj, qdj = d.qpos[7 : 7 + NUM_JOINTS], d.qvel[6:nv]
+        b_lo, b_hi = ctrl.limit_bounds(qj, qdj)
+        rows = np.ones(NUM_JOINTS, bool)
+        if not cfg.limit_stance_legs:
+            for k in stance:
+                rows[6 * k : 6 * k + 6] = False
+        for j in np.flatnonzero(rows & (b_lo > -cfg.limit_active)):
+            g = np.zeros(nv)
+            g[6 + j] = -1.0
+            Gs.append(g)
+            hs.append(-b_lo[j])
+        for j in np.flatnonzero(rows & (b_hi < cfg.limit_active)):
+            g = np.zeros(nv)
+            g[6 + j] = 1.0
+            Gs.append(g)
+            hs.append(b_hi[j])
+    if cfg.touchdown_rate > 0:
+        a = cfg.touchdown_rate
+        for k in (k for k in range(2) if k not in stance):
+            fb = ctrl.feet[k]
+            R = d.xmat[fb].reshape(3, 3)
+            for p in ctrl.corners[k]:
+                pw = d.xpos[fb] + R @ p
+                if pw[2] > cfg.touchdown_zone:
+                    continue
+                jp, _, bp, _ = ctrl._jac(d, fb, pw)
+                zd = jp[2] @ d.qvel[:nv]
+                if cfg.touchdown_speed > 0:  # a speed cap only: zdd >= -a (zd + v_max)
+                    bound = -a * (zd + cfg.touchdown_speed)
+                else:
+                    bound = -2 * a * zd - a * a * (pw[2] + cfg.touchdown_depth)
+                Gs.append(-jp[2])
+                hs.append(bp[2] - bound)
+    return np.array(Gs).reshape(-1, nv), np.array(hs)
+
+
+def limit_bounds(ctrl, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Joint-acceleration bounds ``b_lo <= qdd <= b_hi`` (29,) that keep each joint inside its range.
+
+    With ``l = q_lo + m`` (``m`` = ``limit_margin``) the distance ``h = q - l`` obeys the second-order
+    barrier ``hdd + 2 z a hd + a^2 h >= 0`` (``a`` = ``limit_rate``, ``z`` = ``limit_zeta``): with
+    ``z = 1`` a critically damped approach that never crosses ``h = 0`` from ``h >= 0, hd + a h >= 0``
+    and pulls a joint already past ``l`` back with the same dynamics (``z < 1`` brakes later and may
+    overshoot into the margin). So ``qdd >= -2 z a qd - a^2 (q - l)``, symmetrically at the upper end.
+    Far from a limit the bound is far below what any task asks and the row is left out of the QP."""
+    a, c = ctrl.cfg.limit_rate, 2 * ctrl.cfg.limit_zeta * ctrl.cfg.limit_rate
+    lo, hi = ctrl.q_lo + ctrl.cfg.limit_margin, ctrl.q_hi - ctrl.cfg.limit_margin
+    return -c * qd - a * a * (q - lo), -c * qd - a * a * (q - hi)
