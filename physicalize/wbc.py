@@ -68,6 +68,7 @@ class WBCConfig:
     w_force: float = 1e-5
     # contact state from the simulation
     contact_stance: bool = True
+    other_support: float = 0.2  # fraction of the weight carried by other contacts (a seat) that turns the stepping logic off
     touch_force: float = 20.0  # N: a foot pressing the floor this hard is in contact
     touchdown_height: float = 0.02  # m: a swing foot in contact whose reference sole is this low and not rising has landed
     descend_speed: float = 0.3  # m/s: a stance foot not yet on the floor is driven down at this speed
@@ -215,7 +216,9 @@ class WholeBodyController:
         """One control step from the current state ``d`` (after ``mj_forward``)."""
         m, cfg = self.m, self.cfg
         nv = NV_ROBOT
-        target = self._adapt(d, target) if cfg.contact_stance else target
+        tau_ext = self.external_forces(d)
+        supported = tau_ext[2] > cfg.other_support * self.robot_mass * 9.81  # sitting, leaning: no stepping logic
+        target = self._adapt(d, target) if cfg.contact_stance and not supported else target
         stance = [k for k in range(2) if target.stance[k]]
         nf = 12 * len(stance)
         n = nv + nf
@@ -223,7 +226,6 @@ class WholeBodyController:
         mujoco.mj_fullM(m, d, self._M)
         M = self._M[:nv, :nv]
         h = d.qfrc_bias[:nv] - d.qfrc_passive[:nv]
-        tau_ext = self.external_forces(d)
 
         P = np.zeros((n, n))
         q = np.zeros(n)
