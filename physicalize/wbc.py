@@ -17,6 +17,11 @@ feed-forward: centre of mass, pelvis and torso orientation, swing-foot poses, ha
 posture from the reference. Stance feet hold still with a damping term and are turned back flat
 (``a_foot* = -k_v v - k_p [0; roll/pitch error]``), which keeps a foot from rolling onto its edge.
 
+Support comes from the schedule corrected by the simulation's contacts, and the swing foot lands
+where the divergent component of motion ``xi = c + c_dot / omega`` can be caught (:meth:`_adapt`:
+late and early touchdowns, capture-point step adjustment, the CoM target following the footholds
+taken); off while a seat or an object carries part of the weight.
+
 The joint torques ``tau = M_a qdd + h_a - J_{c,a}^T f - tau_ext,a`` become PD position targets held
 for the control period ``T`` (4 physics steps): ``q* = q_m + (tau + k_d qd_m) / k_p`` at the
 predicted mid-hold state ``q_m = q + qd T/2 + qdd T^2/8``, ``qd_m = qd + qdd T/2``; targets are not
@@ -58,7 +63,6 @@ class WBCConfig:
     stance_kv: float = 20.0
     stance_flat_kp: float = 100.0
     w_com: float = 1000.0
-    com_z_weight: float = 1.0  # the CoM height task's weight relative to the horizontal ones
     w_pelvis: float = 20.0
     w_torso: float = 10.0
     w_swing: float = 100.0
@@ -237,7 +241,7 @@ class WholeBodyController:
 
         c, Jc, bc, cd = self.com(d)
         kp, kd = np.array(cfg.com_kp), np.array(cfg.com_kd)
-        task(Jc, target.com_acc + kp * (target.com - c) + kd * (target.com_vel - cd) - bc, (cfg.w_com, cfg.w_com, cfg.w_com * cfg.com_z_weight))
+        task(Jc, target.com_acc + kp * (target.com - c) + kd * (target.com_vel - cd) - bc, cfg.w_com)
         for body, w, bid in ((self.pelvis, cfg.w_pelvis, 0), (self.torso, cfg.w_torso, 1)):
             Rref = self._ref_rotation(target, bid)
             _, Jr, _, br = self._jac(d, body, d.xpos[body])
