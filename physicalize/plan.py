@@ -4,10 +4,10 @@ schedule, by ZMP preview control (Kajita et al., ICRA 2003).
 The ZMP reference at each frame is the kinematic CoM's ground projection clipped into the
 support polygon of the stance feet (the convex hull of their sole corners): in double support
 the polygon shrunk by :data:`MARGIN` (3 cm: room for the tracker's CoP feedback), where the
-human's balance was already feasible the plan keeps it; in single support the stance foot's polygon scaled by :data:`SINGLE_SUPPORT_SCALE`
-about its centre, so the ZMP is pulled onto the middle of the foot and the tracker keeps room to
-move the CoP for feedback (clipping to the foot's edge left none: the robot fell behind its plan
-in every single support). The cart-table model
+human's balance was already feasible the plan keeps it; in single support the stance foot's
+polygon scaled by :data:`SINGLE_SUPPORT_SCALE` about its centre, so the ZMP is pulled onto the
+middle of the foot and the tracker keeps room to move the CoP for feedback (clipping to the
+foot's edge left none: the robot fell behind its plan in every single support). The cart-table model
 
     x_{k+1} = A x_k + B u_k,   x = (c, c_dot, c_ddot) per horizontal axis,  u = jerk,
     p_k = C x_k = c - (z_c / g) c_ddot

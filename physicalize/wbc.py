@@ -21,6 +21,11 @@ Hand tasks track a point of each hand (``Target.hand_offset``) with per-hand wei
 holds an object (:mod:`physicalize.grasp`), the planned force ``f_k`` it applies enters as the
 reaction ``-J_k^T f_k`` in ``tau_ext`` in place of that object's measured contacts on the forearm.
 
+Support comes from the schedule corrected by the simulation's contacts, and the swing foot lands
+where the divergent component of motion ``xi = c + c_dot / omega`` can be caught (:meth:`_adapt`:
+late and early touchdowns, capture-point step adjustment, the CoM target following the footholds
+taken); off while a seat or an object carries part of the weight.
+
 The joint torques ``tau = M_a qdd + h_a - J_{c,a}^T f - tau_ext,a`` become PD position targets held
 for the control period ``T`` (4 physics steps): ``q* = q_m + (tau + k_d qd_m) / k_p`` at the
 predicted mid-hold state ``q_m = q + qd T/2 + qdd T^2/8``, ``qd_m = qd + qdd T/2``; targets are not
@@ -65,7 +70,6 @@ class WBCConfig:
     stance_kv: float = 20.0
     stance_flat_kp: float = 100.0
     w_com: float = 1000.0
-    com_z_weight: float = 1.0  # the CoM height task's weight relative to the horizontal ones
     w_pelvis: float = 20.0
     w_torso: float = 10.0
     w_swing: float = 100.0
@@ -88,6 +92,7 @@ class WBCConfig:
     w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
     # contact state from the simulation
     contact_stance: bool = True
+    other_support: float = 0.2  # fraction of the weight carried by other contacts (a seat) that turns the stepping logic off
     touch_force: float = 20.0  # N: a foot pressing the floor this hard is in contact
     touchdown_height: float = 0.02  # m: a swing foot in contact whose reference sole is this low and not rising has landed
     descend_speed: float = 0.3  # m/s: a stance foot not yet on the floor is driven down at this speed
@@ -249,7 +254,9 @@ class WholeBodyController:
         """One control step from the current state ``d`` (after ``mj_forward``)."""
         m, cfg = self.m, self.cfg
         nv = NV_ROBOT
-        target = self._adapt(d, target) if cfg.contact_stance else target
+        tau_ext = self.external_forces(d)
+        supported = tau_ext[2] > cfg.other_support * self.robot_mass * 9.81  # sitting, leaning: no stepping logic
+        target = self._adapt(d, target) if cfg.contact_stance and not supported else target
         stance = [k for k in range(2) if target.stance[k]]
         nf = 12 * len(stance)
         n = nv + nf
@@ -257,7 +264,6 @@ class WholeBodyController:
         mujoco.mj_fullM(m, d, self._M)
         M = self._M[:nv, :nv]
         h = d.qfrc_bias[:nv] - d.qfrc_passive[:nv]
-        tau_ext = self.external_forces(d)
 
         P = np.zeros((n, n))
         q = np.zeros(n)
@@ -269,7 +275,7 @@ class WholeBodyController:
 
         c, Jc, bc, cd = self.com(d)
         kp, kd = np.array(cfg.com_kp), np.array(cfg.com_kd)
-        task(Jc, target.com_acc + kp * (target.com - c) + kd * (target.com_vel - cd) - bc, (cfg.w_com, cfg.w_com, cfg.w_com * cfg.com_z_weight))
+        task(Jc, target.com_acc + kp * (target.com - c) + kd * (target.com_vel - cd) - bc, cfg.w_com)
         for body, w, bid in ((self.pelvis, cfg.w_pelvis, 0), (self.torso, cfg.w_torso, 1)):
             Rref = self._ref_rotation(target, bid)
             _, Jr, _, br = self._jac(d, body, d.xpos[body])
