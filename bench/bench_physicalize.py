@@ -9,7 +9,8 @@ Run: ``make bench-physicalize``. Clips: the four embedded default clips and, whe
 is present, the OMOMO box clip, the InterMimic table clip and the PyMO walk. Each clip is first
 retargeted (not timed), then physicalized by :func:`physicalize.stage.physicalize_clip` (timed:
 scene build, reference, plan and closed-loop tracking on one core). ``rt`` is simulated seconds
-per wall second; the issue's bar is >= 5.
+per wall second, ``rt/core`` per CPU second (robust to a shared, loaded machine: everything runs on one
+thread); the issue's bar is >= 5 per core.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
 REAL = ["omomo/sub3_largebox_003.pt", "intermimic/sub2_largetable_000.pt", "bvh/pymo_walk_120hz.bvh"]
 COLUMNS = [("valid", "valid"), ("fell", "fell"), ("frames_simulated", "sim/ref"), ("mpjpe_m", "mpjpe"), ("root_pos_err_max_m", "root max"),
            ("foot_slide_frac_1cm_per_frame", "slide"), ("penetration_max_m", "pen max"), ("torque_saturation_frac", "sat"),
-           ("object_pos_err_m", "obj err"), ("realtime_factor", "rt")]  # fmt: skip
+           ("object_pos_err_m", "obj err"), ("realtime_factor", "rt"), ("realtime_factor_per_core", "rt/core")]  # fmt: skip
 
 
 def _clips():
@@ -69,9 +70,7 @@ def main() -> None:
             for kind in kinds:
                 if kind == "feasible+res":
                     ckpt = train_residual(robot, args.residual_iterations, 16, 0, Path(tmp) / "residual.pt")
-                    _, _, f, _ = physicalize_clip(robot, teacher=f"base+residual:{ckpt}")
-                else:
-                    _, _, f, _ = physicalize_clip(robot, reference=kind)
+                _, _, f, _ = physicalize_clip(robot, **({"teacher": f"base+residual:{ckpt}"} if kind == "feasible+res" else {"reference": kind}))
                 valid[kind].append(f["valid"])
                 print(f"{name:24s}{kind:14s}" + "".join(f"{_cell(k, f):>10s}" for k, _ in COLUMNS) + f"  {f['reason'][:60]}", flush=True)
     for kind, v in valid.items():

@@ -133,13 +133,15 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
 
     spec = parse_teacher(teacher)
     residual = None if spec.checkpoint is None else _load_residual(str(spec.checkpoint), spec.digest)
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     scene, ref, objects, zmp = tracking_problem(clip, profile, reference, grasp)
     qpos0, qvel0 = initial_state(scene, ref, objects)
     roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile), qpos0, qvel0, contact_links=clip.contact_links, perturb=perturb,
                     residual=residual)  # fmt: skip
     roll.seconds = time.perf_counter() - t0  # planning + tracking
+    cpu = time.process_time() - cpu0
     figures = validate(scene, roll, clip.qpos, objects)
+    figures["realtime_factor_per_core"] = roll.frames / clip.fps / max(cpu, 1e-9)  # CPU time of this (single-threaded) process
     qs, _ = replay(scene.model, qpos0, qvel0, roll.action)
     figures["replay_err_max_m"] = float(np.abs(np.vstack([qs[:-1] - roll.qpos, qs[-1:] - roll.final_qpos])).max())
     if figures["replay_err_max_m"] > REPLAY_TOL_M and perturb is None:

@@ -16,7 +16,8 @@ not, with the time it first failed where that has one ("fell at t=3.24 s", "obje
 * ``mpjpe_m`` -- mean over frames and :data:`pipeline.robot.G1_LINK_NAMES` of the link position
   error vs the retargeted reference; ``root_pos_err_max_m``;
 * ``object_pos_err_m`` / ``object_rot_err_rad`` -- mean error vs the reference object track;
-* ``fell``, ``realtime_factor`` (simulated seconds per wall second on one core).
+* ``fell``, ``realtime_factor`` (simulated seconds per wall second on one core; the stage adds
+  ``realtime_factor_per_core``: per CPU second, robust to a loaded machine).
 """
 
 from __future__ import annotations
