@@ -26,7 +26,7 @@ checks these numbers against the installed mjlab.
 
 from __future__ import annotations
 
-import importlib.resources
+import importlib.util
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,7 +65,9 @@ LESSMIMIC_DEMO_DF_BODIES: tuple[str, ...] = (
 
 def g1_xml_path() -> Path:
     """Path of mjlab's ``g1.xml`` inside the installed wheel (meshes in ``../assets`` beside it)."""
-    path = Path(str(importlib.resources.files("mjlab") / "asset_zoo/robots/unitree_g1/xmls/g1.xml"))
+    spec = importlib.util.find_spec("mjlab")  # found, not imported: mjlab's __init__ imports warp and mediapy (~5 s)
+    roots = list(spec.submodule_search_locations or []) if spec is not None else []
+    path = Path(roots[0] if roots else "<mjlab not installed>") / "asset_zoo/robots/unitree_g1/xmls/g1.xml"
     if not path.is_file():
         raise FileNotFoundError(f"G1 model not found at {path}: is mjlab==1.6.0 installed in this environment?")
     return path
