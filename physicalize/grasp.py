@@ -74,6 +74,13 @@ class GraspConfig:
     w_free: float = 5.0  # hand task weight otherwise (the controller's default)
     w_hold_rot: float = 0.0  # hand orientation task weight while grasping (0: posture only)
     replace_measured: bool = True
+    slide_speed: float = 0.05  # m/s: a sliding object's floor friction is ramped in up to this reference speed
+    push_travel: float = 0.10  # m: a one-hand contact holds only an object the reference slides this far (a push)
+    max_hand_force: float = 120.0  # N: cap on the force one hand applies
+    clearance: float = 0.05  # m: an unlabelled hand's surface is kept this far from objects
+    approach_frames: int = 25  # ... except this many frames before and after its labelled contacts (reaching, letting go)
+    w_clear: float = 50.0
+    grip_above: float | None = 0.03  # m: a two-hand grip's axis is moved onto the vertical through the object's centre of mass, this high above it (None: where the reference hands are)  # hand task weight while it is kept off an object
 
 
 @dataclass
@@ -95,6 +102,12 @@ class GraspSchedule:
     rot_weight: np.ndarray  # (T, 2) hand orientation task weight (0 when not grasping)
     mu: float
     replace_measured: bool = True
+    attached: np.ndarray | None = None  # (T, 2, 3) the tracked hand point without the squeeze (on the object's track / kept off it)
+    clear: np.ndarray | None = None  # (T, 2) bool: the hand's target is moved off an object it does not touch in the reference
+
+    def hand_body_targets(self) -> np.ndarray:
+        """(T, 2, 3) hand body origins that put the tracked points on :attr:`attached` at the reference hand orientations."""
+        return self.attached - np.einsum("tkij,kj->tki", self.rot, self.offset)
 
     def fill(self, target: Target, t: int) -> Target:
         """Set ``target``'s hand fields to frame ``t`` of the schedule (in place; returned)."""
@@ -156,19 +169,38 @@ def normal_force(load: np.ndarray, n: np.ndarray, mu: float, cfg: GraspConfig) -
     return N, mu * N >= tangential - 1e-9
 
 
+def _quat_rot(q: np.ndarray) -> np.ndarray:
+    R = np.empty(9)
+    mujoco.mju_quat2Mat(R, q)
+    return R.reshape(3, 3)
+
+
+def _label_runs(key: np.ndarray) -> list[tuple[int, int, int]]:
+    """``(a, b, value)`` of the runs of equal values >= 0 in an int array."""
+    out, a = [], 0
+    for t in range(1, len(key) + 1):
+        if t == len(key) or key[t] != key[a]:
+            if key[a] >= 0:
+                out.append((a, t, int(key[a])))
+            a = t
+    return out
+
+
 def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: np.ndarray | None, objects: dict[str, np.ndarray],
                    cfg: GraspConfig = GraspConfig()) -> GraspSchedule | None:  # fmt: skip
     """The schedule for reference ``ref`` (:class:`physicalize.reference.Reference`, ``T`` frames) from
     the clip's contact labels ``contacts`` (T, len(contact_links)) and the reference object tracks
-    ``objects`` (name -> (T, 7) pose); ``None`` when no frame is a grasp (the reference is left as it is)."""
-    if contacts is None or not scene.object_qpos_adr:
+    ``objects`` (name -> (T, 7) pose); ``None`` when no frame holds an object and no hand needs
+    keeping off one (the reference is left as it is)."""
+    if not scene.object_qpos_adr:
         return None
     links = list(contact_links)
-    if not all(h in links for h in HAND_BODIES):
-        return None
+    if contacts is None or not all(h in links for h in HAND_BODIES):
+        labels = np.zeros((ref.frames, 2), bool)
+    else:
+        labels = np.stack([keep_runs(keep_runs(np.asarray(contacts[: ref.frames, links.index(h)], bool), cfg.min_run, True), cfg.min_run, False)
+                           for h in HAND_BODIES], axis=1)  # fmt: skip
     m, T, fps = scene.model, ref.frames, ref.fps
-    labels = np.stack([keep_runs(keep_runs(np.asarray(contacts[:T, links.index(h)], bool), cfg.min_run, True), cfg.min_run, False)
-                       for h in HAND_BODIES], axis=1)  # fmt: skip
     names = list(scene.object_qpos_adr)
     obj_geoms = [[g for g in range(m.ngeom) if m.geom_contype[g] and m.geom_bodyid[g] == scene.object_body_id[n]] for n in names]
     hgeoms = hand_geoms(m)
@@ -176,8 +208,8 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
     offset = hand_offsets(m)
     d = mujoco.MjData(m)
     centre, rot = np.zeros((T, 2, 3)), np.zeros((T, 2, 3, 3))
-    normal, gap = np.zeros((T, 2, 3)), np.zeros((T, 2))
-    obj = np.full(T, -1)
+    near_d, near_n, near_o = np.full((T, 2), np.inf), np.zeros((T, 2, 3)), np.full((T, 2), -1)  # nearest object per hand
+    reach = max(cfg.max_gap, cfg.clearance)
     fromto = np.zeros(6)
     for t in range(T):
         d.qpos[:36] = ref.qpos[t]
@@ -188,33 +220,69 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
         for k in range(2):
             rot[t, k] = d.xmat[hand_ids[k]].reshape(3, 3)
             centre[t, k] = d.xpos[hand_ids[k]] + rot[t, k] @ offset[k]
-        if not labels[t].all():
-            continue
-        best = None
-        for i, og in enumerate(obj_geoms):
-            hits = []
-            for k in range(2):
-                dist, _, _ = nearest_geom_pair(m, d, hgeoms[k], og, cfg.max_gap, fromto)
-                if dist >= cfg.max_gap:
-                    break
-                v = (fromto[3:] - fromto[:3]) * (1.0 if dist >= 0 else -1.0)
-                nv = np.linalg.norm(v)
-                hits.append((dist, v / nv if nv > 1e-6 else (d.xipos[scene.object_body_id[names[i]]] - centre[t, k])))
-            if len(hits) == 2 and (best is None or hits[0][0] + hits[1][0] < best[0]):
-                best = (hits[0][0] + hits[1][0], i, hits)
-        if best is None:
-            continue
-        (dl, nl), (dr, nr) = best[2]
-        nl, nr = nl / np.linalg.norm(nl), nr / np.linalg.norm(nr)
-        if nl @ nr > -cfg.min_opposition:
-            continue
-        n = (nl - nr) / np.linalg.norm(nl - nr)
-        obj[t], normal[t], gap[t] = best[1], (n, -n), (dl, dr)
-    grasped = obj >= 0
-    grasped = keep_runs(grasped, cfg.min_run, True)
-    obj[~grasped] = -1
-    s = _ramp(grasped, cfg.ramp_frames)
-    point = centre + (s[:, None] * (gap + cfg.depth))[..., None] * normal
+            for i, og in enumerate(obj_geoms):
+                dist, _, _ = nearest_geom_pair(m, d, hgeoms[k], og, reach, fromto)
+                if dist < min(reach, near_d[t, k]):
+                    v = (fromto[3:] - fromto[:3]) * (1.0 if dist >= 0 else -1.0)
+                    nv = np.linalg.norm(v)
+                    near_d[t, k], near_o[t, k] = dist, i
+                    near_n[t, k] = v / nv if nv > 1e-6 else (d.xipos[scene.object_body_id[names[i]]] - centre[t, k]) / max(np.linalg.norm(d.xipos[scene.object_body_id[names[i]]] - centre[t, k]), 1e-9)
+    # which hand holds which object, per frame
+    held = labels & (near_d < cfg.max_gap)
+    both = held.all(axis=1) & (near_o[:, 0] == near_o[:, 1])
+    opposed = both & (np.einsum("ti,ti->t", near_n[:, 0], near_n[:, 1]) <= -cfg.min_opposition)
+    key = np.where(held, near_o, -1)
+    key[held.all(axis=1) & ~both] = -1  # both hands labelled on different objects: left to the reference
+    for k in range(2):
+        key[:, k] = np.where(keep_runs(key[:, k] >= 0, cfg.min_run, True), key[:, k], -1)
+    for k in range(2):  # one hand alone only pushes an object along the floor
+        alone = np.where((key[:, k] >= 0) & (key[:, 1 - k] != key[:, k]), key[:, k], -1)
+        for a, b, i in _label_runs(alone):
+            if not _pushed(objects[names[i]][a:b], cfg):
+                key[a:b, k] = -1
+    held = key >= 0
+    opposed &= held.all(axis=1)
+    s = np.stack([_ramp(held[:, k], cfg.ramp_frames) for k in range(2)], axis=1)
+    # targets fixed to the object: the hand point and normal where the run starts, moved with the object's reference pose
+    point, normal, gap = centre.copy(), np.zeros((T, 2, 3)), np.zeros((T, 2))
+    for k in range(2):
+        for a, b, i in _label_runs(key[:, k]):
+            pose = objects[names[i]]
+            win = np.arange(a, min(b, a + cfg.ramp_frames))
+            both_in = win[opposed[win]]
+            if both_in.size:  # a two-hand grip: one anchor frame for both hands, the grip axis moved over the centre of mass
+                t0 = int(both_in[np.argmin(np.abs(near_d[both_in]).sum(axis=1))])
+            else:
+                t0 = int(win[np.argmin(np.abs(near_d[win, k]))])
+            R0 = _quat_rot(pose[t0, 3:7])
+            c0 = centre[t0, k].copy()
+            if both_in.size:  # both hand points on one line along the grip normal (else the squeezes make a couple that spins the object)
+                n = near_n[t0, 0] - near_n[t0, 1]
+                n /= max(np.linalg.norm(n), 1e-9)
+                axis = centre[t0].mean(axis=0)
+                if cfg.grip_above is not None:
+                    axis = pose[t0, :3] + R0 @ m.body_ipos[scene.object_body_id[names[i]]] + [0.0, 0.0, cfg.grip_above]
+                c0 = axis + ((c0 - axis) @ n) * n
+            c_o, n_o = R0.T @ (c0 - pose[t0, :3]), R0.T @ near_n[t0, k]
+            for t in range(a, b):
+                R = _quat_rot(pose[t, 3:7])
+                normal[t, k] = R @ n_o
+                gap[t, k] = near_d[t0, k]
+                point[t, k] = (1 - s[t, k]) * centre[t, k] + s[t, k] * (pose[t, :3] + R @ c_o)
+    for t in np.flatnonzero(opposed):  # squeezes that cancel: exactly opposite normals
+        n = normal[t, 0] - normal[t, 1]
+        n /= max(np.linalg.norm(n), 1e-9)
+        normal[t] = (n, -n)
+    attached = point.copy()
+    point += (s * (gap + cfg.depth))[..., None] * normal
+    # hands kept off objects they do not touch in the reference
+    weight = cfg.w_free + s * (cfg.w_hold - cfg.w_free)
+    near_run = np.stack([_dilate(labels[:, k], cfg.approach_frames) for k in range(2)], axis=1)
+    clear = ~near_run & (near_d < cfg.clearance)
+    push_out = np.where(clear, cfg.clearance - near_d, 0.0)
+    point -= push_out[..., None] * near_n
+    attached -= push_out[..., None] * near_n
+    weight = np.where(clear, max(cfg.w_clear, cfg.w_free), weight)
     dt = 1.0 / fps
     vel = np.gradient(point, dt, axis=0) if T > 1 else np.zeros_like(point)
     acc = np.gradient(vel, dt, axis=0) if T > 2 else np.zeros_like(point)
@@ -222,8 +290,7 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
     friction_ok = np.ones(T, bool)
     body = np.full((T, 2), -1)
     mu = np.inf
-    for a, b in _runs(grasped):
-        i = int(obj[a])
+    for i in sorted(set(key[held].tolist())):
         name = names[i]
         bid = scene.object_body_id[name]
         for k in range(2):
@@ -233,19 +300,60 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
                     if condim < 3 or f <= 0:
                         raise ValueError(f"hand geom {m.geom(hg).name!r} on {name!r}: condim {condim}, friction {f}: a frictionless contact cannot hold")
                     mu = min(mu, f)
+    for k in range(2):
+        for a, b, i in _label_runs(key[:, k]):
+            body[a:b, k] = scene.object_body_id[names[i]]
+    for a, b, _ in _label_runs(np.where(held.any(axis=1), np.where(held[:, 0], key[:, 0], key[:, 1]), -1)):
+        i = int(key[a, 0] if held[a, 0] else key[a, 1])
+        name = names[i]
+        bid = scene.object_body_id[name]
         mass = float(m.body_subtreemass[bid])
+        floor_mu = _floor_friction(m, obj_geoms[i])
         pos = objects[name][:T, :3]
-        a_o = np.gradient(np.gradient(pos, dt, axis=0), dt, axis=0) if T > 2 else np.zeros_like(pos)
+        v_o = np.gradient(pos, dt, axis=0) if T > 1 else np.zeros_like(pos)
+        a_o = np.gradient(v_o, dt, axis=0) if T > 2 else np.zeros_like(pos)
         lam = np.clip((pos[:, 2] - pos[a, 2]) / cfg.lift_blend, 0.0, 1.0)
         for t in range(a, b):
-            share = 0.5 * lam[t] * mass * (a_o[t] + [0.0, 0.0, GRAVITY])
-            for k in range(2):
-                N, ok = normal_force(share, normal[t, k], mu, cfg)
-                force[t, k] = s[t] * (N * normal[t, k] + share)
+            hands = [k for k in range(2) if key[t, k] == i]
+            speed = float(np.linalg.norm(v_o[t, :2]))
+            drag = np.zeros(3)
+            if speed > 1e-6:  # sliding on its support: kinetic friction against the motion
+                drag[:2] = floor_mu * mass * GRAVITY * min(1.0, speed / cfg.slide_speed) * v_o[t, :2] / speed
+            F = mass * np.r_[a_o[t, :2], lam[t] * a_o[t, 2]] + lam[t] * mass * GRAVITY * np.array([0, 0, 1.0]) + (1 - lam[t]) * drag
+            share = F / len(hands)
+            for k in hands:
+                if opposed[t]:
+                    N, ok = normal_force(share, normal[t, k], mu, cfg)
+                    f_k = N * normal[t, k] + share
+                else:  # pushing on one side: the normal part must press, the rest is friction
+                    N, ok = normal_force(share, normal[t, k], mu, cfg)
+                    f_k = share + max(0.0, N - share @ normal[t, k]) * normal[t, k]
+                nf = np.linalg.norm(f_k)
+                if nf > cfg.max_hand_force:
+                    f_k *= cfg.max_hand_force / nf
+                    ok = False
+                force[t, k] = s[t, k] * f_k
                 friction_ok[t] &= ok
-            body[t] = bid
-    weight = np.repeat((cfg.w_free + s * (cfg.w_hold - cfg.w_free))[:, None], 2, axis=1)
-    if not grasped.any():
+    if not held.any() and not clear.any():
         return None
-    return GraspSchedule(offset, point, vel, acc, weight, force, normal, np.repeat(grasped[:, None], 2, 1), body, obj, friction_ok,
-                         rot, np.repeat((s * cfg.w_hold_rot)[:, None], 2, 1), float(mu), cfg.replace_measured)  # fmt: skip
+    return GraspSchedule(offset, point, vel, acc, weight, force, normal, held, body, np.where(held[:, 0], key[:, 0], key[:, 1]), friction_ok,
+                         rot, s * cfg.w_hold_rot, float(mu) if np.isfinite(mu) else 0.0, cfg.replace_measured, attached, clear)  # fmt: skip
+
+
+def _pushed(pose: np.ndarray, cfg: GraspConfig) -> bool:
+    """The object slides along its support during these frames: it moves > ``push_travel`` horizontally and is not lifted."""
+    travel = float(np.linalg.norm(pose[:, :2] - pose[0, :2], axis=1).max())
+    return travel > cfg.push_travel and float(pose[:, 2].max() - pose[0, 2]) < cfg.lift_blend
+
+
+def _dilate(mask: np.ndarray, n: int) -> np.ndarray:
+    out = mask.copy()
+    for a, b in _runs(mask):
+        out[max(0, a - n) : b + n] = True
+    return out
+
+
+def _floor_friction(model: mujoco.MjModel, geoms: list[int]) -> float:
+    """Sliding friction of the object's geoms on the floor (MuJoCo's mixing rule)."""
+    floor = model.geom("floor").id
+    return max(contact_friction(model, g, floor)[1] for g in geoms) if geoms else 0.0

@@ -115,7 +115,11 @@ def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "
         for o in (o for o in clip.objects if o.name in scene.object_qpos_adr):  # free objects; fixed ones are in the model
             adr = scene.object_qpos_adr[o.name] - 36
             obj_q[:, adr : adr + 7] = o.pose[: ref.frames]
-        ref = feasible_reference(m, ref, plan_com, stats=stats, objects=obj_q if clip.objects else None)
+        hands = None
+        if grasp:  # hands held on an object move with its reference track (the retargeted hands drift off it): the IK re-solves the arms onto that
+            pre = grasp_schedule(scene, ref, clip.contact_links, clip.contacts, {o.name: o.pose for o in clip.objects})
+            hands = None if pre is None else pre.hand_body_targets()
+        ref = feasible_reference(m, ref, plan_com, stats=stats, objects=obj_q if clip.objects else None, hand_targets=hands)
         zmp = stats["plan"][2]
     objects = {o.name: o.pose for o in clip.objects}
     if grasp:
