@@ -72,7 +72,7 @@ class GraspConfig:
     max_gap: float = 0.10  # a labelled hand farther than this from the object does not grasp
     w_hold: float = 100.0  # hand task weight while grasping
     w_free: float = 5.0  # hand task weight otherwise (the controller's default)
-    w_hold_rot: float = 0.0  # hand orientation task weight while grasping (0: posture only)
+    w_hold_rot: float = 20.0  # hand orientation task weight while squeezing an object between the hands (omomo box: 0 -> 20 kept it in the grip, obj err 0.247 -> 0.066 m)
     replace_measured: bool = True
     slide_speed: float = 0.05  # m/s: a sliding object's floor friction is ramped in up to this reference speed
     push_travel: float = 0.10  # m: a one-hand contact holds only an object the reference slides this far (a push)
@@ -80,6 +80,7 @@ class GraspConfig:
     clearance: float = 0.05  # m: an unlabelled hand's surface is kept this far from objects
     approach_frames: int = 25  # ... except this many frames before and after its labelled contacts (reaching, letting go)
     w_clear: float = 50.0
+    side_lift: float = 0.5  # share of a lifted object's weight the hands carry when they hold it from one side (not squeezed between them)
     grip_above: float | None = 0.03  # m: a two-hand grip's axis is moved onto the vertical through the object's centre of mass, this high above it (None: where the reference hands are)  # hand task weight while it is kept off an object
 
 
@@ -103,6 +104,7 @@ class GraspSchedule:
     mu: float
     replace_measured: bool = True
     attached: np.ndarray | None = None  # (T, 2, 3) the tracked hand point without the squeeze (on the object's track / kept off it)
+    hold_ref: np.ndarray | None = None  # (T, 2, 3) reference position of the object each hand holds (0 when none)
     clear: np.ndarray | None = None  # (T, 2) bool: the hand's target is moved off an object it does not touch in the reference
 
     def hand_body_targets(self) -> np.ndarray:
@@ -115,6 +117,8 @@ class GraspSchedule:
         target.hand_offset, target.hand_weight, target.hand_force = self.offset, self.weight[t], self.force[t]
         target.hand_object = self.body[t] if self.replace_measured else np.full(2, -1)
         target.hand_rot, target.hand_rot_weight = self.rot[t], self.rot_weight[t]
+        if self.hold_ref is not None:
+            target.hand_hold_body, target.hand_hold_ref = self.body[t], self.hold_ref[t]
         return target
 
 
@@ -300,9 +304,11 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
                     if condim < 3 or f <= 0:
                         raise ValueError(f"hand geom {m.geom(hg).name!r} on {name!r}: condim {condim}, friction {f}: a frictionless contact cannot hold")
                     mu = min(mu, f)
+    hold_ref = np.zeros((T, 2, 3))
     for k in range(2):
         for a, b, i in _label_runs(key[:, k]):
             body[a:b, k] = scene.object_body_id[names[i]]
+            hold_ref[a:b, k] = objects[names[i]][a:b, :3]
     for a, b, _ in _label_runs(np.where(held.any(axis=1), np.where(held[:, 0], key[:, 0], key[:, 1]), -1)):
         i = int(key[a, 0] if held[a, 0] else key[a, 1])
         name = names[i]
@@ -320,14 +326,18 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
             if speed > 1e-6:  # sliding on its support: kinetic friction against the motion
                 drag[:2] = floor_mu * mass * GRAVITY * min(1.0, speed / cfg.slide_speed) * v_o[t, :2] / speed
             F = mass * np.r_[a_o[t, :2], lam[t] * a_o[t, 2]] + lam[t] * mass * GRAVITY * np.array([0, 0, 1.0]) + (1 - lam[t]) * drag
+            if not opposed[t]:  # lifted from one side only: the far side still rests on its support
+                F[2] -= (1 - cfg.side_lift) * lam[t] * mass * (GRAVITY + a_o[t, 2])
             share = F / len(hands)
             for k in hands:
                 if opposed[t]:
                     N, ok = normal_force(share, normal[t, k], mu, cfg)
                     f_k = N * normal[t, k] + share
-                else:  # pushing on one side: the normal part must press, the rest is friction
-                    N, ok = normal_force(share, normal[t, k], mu, cfg)
-                    f_k = share + max(0.0, N - share @ normal[t, k]) * normal[t, k]
+                else:  # pushing from one side: no squeeze to cancel; the normal part presses at least safety |F_t| / mu
+                    push = float(share @ normal[t, k])
+                    tangential = float(np.linalg.norm(share - push * normal[t, k]))
+                    N = min(max(push, cfg.safety * tangential / mu, 0.0), cfg.max_hand_force)
+                    f_k, ok = share + (N - push) * normal[t, k], mu * N >= tangential - 1e-9
                 nf = np.linalg.norm(f_k)
                 if nf > cfg.max_hand_force:
                     f_k *= cfg.max_hand_force / nf
@@ -337,7 +347,7 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
     if not held.any() and not clear.any():
         return None
     return GraspSchedule(offset, point, vel, acc, weight, force, normal, held, body, np.where(held[:, 0], key[:, 0], key[:, 1]), friction_ok,
-                         rot, s * cfg.w_hold_rot, float(mu) if np.isfinite(mu) else 0.0, cfg.replace_measured, attached, clear)  # fmt: skip
+                         rot, s * cfg.w_hold_rot * opposed[:, None], float(mu) if np.isfinite(mu) else 0.0, cfg.replace_measured, attached, hold_ref, clear)  # fmt: skip
 
 
 def _pushed(pose: np.ndarray, cfg: GraspConfig) -> bool:
