@@ -4,31 +4,47 @@ The object is a free body moved only by contact, so a hand holds it by pressing 
 friction that pressure allows. From the clip's hand-object contact labels and the reference object
 track this module plans, per control frame ``t`` and hand ``k``:
 
-* **which hand holds which object.** A hand *grasps* object ``o`` on frames where its contact label
-  is set (runs shorter than :attr:`GraspConfig.min_run` dropped), both hands' labels are set, ``o``
-  is the free object nearest both hands and the hands face each other across it (inward normals
-  ``n_l . n_r <= -``:attr:`GraspConfig.min_opposition`). Other contacts are left to the reference.
-* **where the hand goes: a squeeze.** At the reference configuration (robot ``q_t``, object pose
-  ``X_t``) MuJoCo's ``mj_geomDistance`` gives the hand's contact surface's signed distance ``d_k`` to
-  the object and the nearest points; their direction is the inward surface normal ``n_k``. The two
-  normals are made exactly opposite, ``n = (n_l - n_r)/|n_l - n_r|``, ``n_l = n``, ``n_r = -n``, so the
-  squeezes cancel on the object. The tracked hand point ``c_k`` (its contact geom's centre, a fixed
-  point ``r_k`` of the hand body) gets the target ``c*_k = c_k + s(t) (d_k + delta) n_k``: the hand's
-  surface is driven ``delta`` (:attr:`GraspConfig.depth`) *into* the object, so the PD task presses
-  with a bounded force while the object blocks the hand; ``s(t)`` ramps 0 -> 1 over
-  :attr:`GraspConfig.ramp_frames` at each end of a grasp (close, release). Hand target velocity and
-  acceleration are the finite differences of ``c*``; the hand task weight is
-  :attr:`GraspConfig.w_hold` while grasping (the controller's own ``w_hand`` otherwise).
-* **the force the hands must apply.** With the reference object acceleration ``a_o`` (central
-  differences of its track) and ``lambda(t) = clip((z_o(t) - z_o(t_0)) / lift_blend, 0, 1)`` (0 while the
-  object still rests where the grasp started, 1 once the reference has lifted it), the hands must
-  carry ``F = lambda m (a_o + g e_z)``, half each: ``F_k = F/2``. Its part along the surface,
-  ``F_t,k = F_k - (F_k . n_k) n_k``, must come from friction: Coulomb's ``|F_t,k| <= mu N_k``, so the
-  normal (squeeze) force is ``N_k = clip(max(N_min, safety |F_t,k| / mu), 0, N_max)`` (``friction_ok``
-  records ``mu N_k >= |F_t,k|``). The hand pushes the object with ``f_k = s(t) (N_k n_k + F_k)``.
-  ``mu`` and ``condim`` of a hand-object contact follow MuJoCo's mixing rule (:func:`contact_friction`):
-  the geom with the higher ``priority`` decides, else the larger friction and condim; ``condim 1``
-  (frictionless) cannot hold anything and raises.
+* **which hand holds which object.** A hand *holds* object ``o`` on frames where its contact label
+  is set (runs shorter than :attr:`GraspConfig.min_run` dropped) and ``o`` is the free object nearest
+  it (within :attr:`GraspConfig.max_gap`). Both hands on ``o`` facing each other across it (inward
+  normals ``n_l . n_r <= -``:attr:`GraspConfig.min_opposition`) *squeeze* it; otherwise they press on it
+  from one side (a push, a lift from below). One hand alone holds only an object the reference slides
+  more than :attr:`GraspConfig.push_travel` without lifting it (a one-hand push).
+* **where the hand goes: on the object's track.** At the run's anchor frame ``t_0`` (the first
+  ``ramp_frames`` frames, least surface gap) MuJoCo's ``mj_geomDistance`` gives the hand surface's signed
+  distance ``d_k`` to the object and its inward normal ``n_k``; the hand point ``c_k`` (its contact geoms'
+  centre, a fixed point of the hand body) is fixed in the object frame, ``c_k^o = X_o(t_0)^-1 c_k``,
+  and follows the *reference object pose*: ``c*_k(t) = (1 - s) c_k(t) + s (X_o(t) c_k^o + (d_k + delta) R_o(t) n_k^o)``
+  (the retargeted hands drift off the object: omomo's were 15 cm below the box after the lift). The
+  surface is driven ``delta`` (:attr:`GraspConfig.depth`) into the object; ``s(t)`` ramps 0 -> 1 over
+  :attr:`GraspConfig.ramp_frames` at each end of a hold. For a squeeze the two normals are made exactly
+  opposite, ``n = (n_l - n_r)/|n_l - n_r|``, and both anchors are moved onto one line along ``n`` through
+  the point :attr:`GraspConfig.grip_above` over the object's centre of mass: point contacts resist no
+  torque about the line between them, so offset anchors make the squeezes a couple that spins the object
+  and a grip axis beside the centre of mass lets it swing. The feasible reference's IK re-solves the arms
+  onto these targets (``attached``; :func:`physicalize.stage.tracking_problem`). Squeezing hands also
+  track their reference orientation (:attr:`GraspConfig.w_hold_rot`). Velocity and acceleration
+  targets are the finite differences of ``c*``; the hand task weight is :attr:`GraspConfig.w_hold` while
+  holding.
+* **hands kept off what they do not touch.** A hand that is not labelled in contact (and not within
+  :attr:`GraspConfig.approach_frames` of a labelled contact) whose reference surface comes closer than
+  :attr:`GraspConfig.clearance` to an object gets its target moved out along the normal to that
+  clearance, weight :attr:`GraspConfig.w_clear` (SitStand: the wrists lifted the chair 20 cm).
+* **the force the hands must apply.** With the reference object velocity ``v_o`` and acceleration
+  ``a_o`` (central differences of its track) and ``lambda(t) = clip((z_o(t) - z_o(t_0)) / lift_blend, 0, 1)``
+  (0 while the object rests where the hold started, 1 once lifted), the hands must apply
+  ``F = m [a_o,xy; lambda a_o,z] + lambda m g e_z + (1 - lambda) mu_s m g min(1, |v_xy| / slide_speed) v_xy/|v_xy|``
+  (its inertia, its weight once lifted, its sliding friction on its support while resting; ``mu_s``:
+  the object-floor friction by MuJoCo's mixing rule); a one-side lift carries only
+  :attr:`GraspConfig.side_lift` of the weight (the far side still rests). Each holding hand takes
+  ``F_k = F / n_hands``. Squeezing: the part along the surface, ``F_t,k = F_k - (F_k . n_k) n_k``, must come
+  from friction, so ``N_k = clip(max(N_min, safety |F_t,k| / mu), 0, N_max)`` and ``f_k = s (N_k n_k + F_k)``.
+  Pressing from one side there is no squeeze to cancel: ``N_k = max(F_k . n_k, safety |F_t,k| / mu, 0)``,
+  ``f_k = s (F_k + (N_k - F_k . n_k) n_k)`` (exactly ``F_k`` for a push along the normal). ``|f_k|`` is capped
+  at :attr:`GraspConfig.max_hand_force`; ``friction_ok`` records ``mu N_k >= |F_t,k|``. ``mu`` and ``condim`` of a
+  hand-object contact follow MuJoCo's mixing rule (:func:`contact_friction`): the geom with the higher
+  ``priority`` decides, else the larger friction and condim; ``condim 1`` (frictionless) cannot hold
+  anything and raises.
 
 The controller (:class:`physicalize.wbc.WholeBodyController`) adds ``-J_k^T f_k`` (the object's
 reaction at the hand point) to the measured external generalized force ``tau_ext`` -- so the QP's
