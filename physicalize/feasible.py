@@ -254,16 +254,20 @@ class ReferenceIK:
             self._relaxed += cfg.exact_stance
         c.integrate_inplace(dq, 1.0)
 
-    def solve(self, ref: Reference, com_plan: np.ndarray, objects: np.ndarray | None = None) -> np.ndarray:
+    def solve(self, ref: Reference, com_plan: np.ndarray, objects: np.ndarray | None = None, hand_targets: np.ndarray | None = None) -> np.ndarray:
         """``(T, 36)`` robot ``qpos``: the reference re-solved so its CoM follows ``com_plan`` (T, 3).
         ``objects`` (T, nq - 36): the objects' qpos per frame (their reference track); the robot then
-        keeps out of them (``object_collision``), else they stay at ``qpos0`` and are ignored."""
+        keeps out of them (``object_collision``), else they stay at ``qpos0`` and are ignored.
+        ``hand_targets`` (T, 2, 3): hand body positions replacing the reference's (e.g. hands held on
+        an object, :func:`physicalize.grasp.grasp_schedule`'s ``attached``)."""
         cfg, m, c = self.cfg, self.model, self.configuration
         self._objects_on = objects is not None and bool(self.object_limit)
         T = ref.frames
         t0 = time.perf_counter()
         feet = self.foot_targets = foot_targets(ref, self.sole_z, cfg.footstep_tolerance)
         links = self._reference_poses(ref.qpos)
+        if hand_targets is not None:
+            links[:, :2, 4:] = hand_targets[:T]
         lo, hi = m.jnt_range[1:, 0], m.jnt_range[1:, 1]
         hinge = np.array([int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_HINGE) and m.jnt_limited[j] for j in range(1, m.njnt)])
         q = m.qpos0.copy()
@@ -327,7 +331,8 @@ def resolve_reference(model: mujoco.MjModel, ref: Reference, com_plan: np.ndarra
 
 
 def feasible_reference(model: mujoco.MjModel, ref: Reference, plan_fn: Callable = plan_com, *, passes: int = 1, replan: bool = False,
-                       config: FeasibleConfig = FeasibleConfig(), stats: dict | None = None, objects: np.ndarray | None = None) -> Reference:  # fmt: skip
+                       config: FeasibleConfig = FeasibleConfig(), stats: dict | None = None, objects: np.ndarray | None = None,
+                       hand_targets: np.ndarray | None = None) -> Reference:  # fmt: skip
     """The reference to track: plan the CoM on ``ref`` (``plan_fn(ref)[0]``), re-solve the whole body
     to it, and build the :class:`Reference` of the re-solved motion with ``ref``'s stance schedule and
     ``com_plan`` set. With ``passes`` > 1, each further pass plans on the previous pass's re-solved
@@ -336,7 +341,8 @@ def feasible_reference(model: mujoco.MjModel, ref: Reference, plan_fn: Callable 
     ``com_plan`` and the re-solved CoM differ). ``stats`` (if given) gets the last IK's figures, the
     IK time of all passes, the CoM error of the last re-solve and ``plan``: the plan tracked
     (``plan_fn``'s whole output, e.g. with the ZMP series for the plots). ``objects`` (T, nq - 36): the
-    objects' qpos per frame, which the re-solved body keeps out of (:meth:`ReferenceIK.solve`)."""
+    objects' qpos per frame, which the re-solved body keeps out of (:meth:`ReferenceIK.solve`);
+    ``hand_targets`` (T, 2, 3): hand body positions replacing the reference's."""
     if passes < 1:
         raise ValueError("feasible_reference: passes must be >= 1")
     ik = ReferenceIK(model, config)
@@ -344,7 +350,7 @@ def feasible_reference(model: mujoco.MjModel, ref: Reference, plan_fn: Callable 
     for _ in range(passes):
         planned = plan_fn(planned_on)
         com_plan = planned[0]
-        out = build_reference(model, ik.solve(ref, com_plan, objects), ref.fps)
+        out = build_reference(model, ik.solve(ref, com_plan, objects, hand_targets), ref.fps)
         out.stance = ref.stance.copy()
         planned_on, seconds = out, seconds + ik.stats["seconds"]
     com_err = float(np.linalg.norm(out.com - com_plan, axis=1).max())

@@ -97,7 +97,7 @@ def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "
     with ``grasp``, hands that hold an object squeeze it and carry its weight (:mod:`physicalize.grasp`).
     Shared by :func:`physicalize_clip` and the residual's training (:mod:`physicalize.residual`)."""
     from physicalize.feasible import feasible_reference
-    from physicalize.grasp import grasp_schedule
+    from physicalize.grasp import grasp_schedule, seat_ramp
     from physicalize.plan import plan_com
     from physicalize.reference import build_reference
 
@@ -115,7 +115,19 @@ def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "
         for o in (o for o in clip.objects if o.name in scene.object_qpos_adr):  # free objects; fixed ones are in the model
             adr = scene.object_qpos_adr[o.name] - 36
             obj_q[:, adr : adr + 7] = o.pose[: ref.frames]
-        ref = feasible_reference(m, ref, plan_com, stats=stats, objects=obj_q if clip.objects else None)
+        hands = None
+        if grasp:  # hands held on an object move with its reference track (the retargeted hands drift off it): the IK re-solves the arms onto that
+            pre = grasp_schedule(scene, ref, clip.contact_links, clip.contacts, {o.name: o.pose for o in clip.objects})
+            hands = None if pre is None else pre.hand_body_targets()
+        plan_fn = plan_com
+        seat = seat_ramp(clip.contact_links, clip.contacts, ref.frames) if grasp else None
+        if seat is not None:  # sitting: the seat carries the body, the CoM goes where the reference puts it
+
+            def plan_fn(r, _s=seat[:, None]):
+                out = plan_com(r)
+                return ((1 - _s) * out[0] + _s * r.com, *out[1:])
+
+        ref = feasible_reference(m, ref, plan_fn, stats=stats, objects=obj_q if clip.objects else None, hand_targets=hands)
         zmp = stats["plan"][2]
     objects = {o.name: o.pose for o in clip.objects}
     if grasp:

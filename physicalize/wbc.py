@@ -19,7 +19,10 @@ posture from the reference. Stance feet hold still with a damping term and are t
 (``a_foot* = -k_v v - k_p [0; roll/pitch error]``), which keeps a foot from rolling onto its edge.
 Hand tasks track a point of each hand (``Target.hand_offset``) with per-hand weights and, while a hand
 holds an object (:mod:`physicalize.grasp`), the planned force ``f_k`` it applies enters as the
-reaction ``-J_k^T f_k`` in ``tau_ext`` in place of that object's measured contacts on the forearm.
+reaction ``-J_k^T f_k`` in ``tau_ext`` in place of that object's measured contacts on the forearm; a held
+object that lags its reference position by ``e`` with ``|e| > hand_lead`` moves the hand target by
+``e (1 - hand_lead/|e|)`` (the hands stay on the object and push it back with a bounded PD force instead
+of running ahead and pushing the robot off its feet).
 
 Support comes from the schedule corrected by the simulation's contacts, and the swing foot lands
 where the divergent component of motion ``xi = c + c_dot / omega`` can be caught (:meth:`_adapt`:
@@ -89,6 +92,7 @@ class WBCConfig:
     touchdown_depth: float = 0.015  # m below the floor that barrier aims at (0 would never touch down)
     touchdown_speed: float = 0.8  # m/s (0.5 fell in test_gait's -y push while walking): a descent-speed cap zdd >= -a (zd + speed); 0: the barrier towards -touchdown_depth
     touchdown_zone: float = 0.10  # m: sole corners higher than this get no row
+    hand_lead: float = 0.05  # m: a held object farther than this from its reference position takes the hand targets along (the rest stays a bounded push towards the reference)
     w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
     # contact state from the simulation
     contact_stance: bool = True
@@ -130,6 +134,8 @@ class Target:
     hand_object: np.ndarray | None = None  # (2,) body id whose measured contacts with that forearm and hand hand_force replaces, -1 none
     hand_rot: np.ndarray | None = None  # (2, 3, 3) hand orientations, tracked with weights hand_rot_weight (2,)
     hand_rot_weight: np.ndarray | None = None
+    hand_hold_body: np.ndarray | None = None  # (2,) body id of the object each hand holds, -1 none
+    hand_hold_ref: np.ndarray | None = None  # (2, 3) that object's reference position: its lag beyond hand_lead moves the hand target along
 
 
 @dataclass
@@ -307,7 +313,13 @@ class WholeBodyController:
                 hb = self.hands[k]
                 p = d.xpos[hb] + d.xmat[hb].reshape(3, 3) @ off[k]
                 Jp, Jr, bp, br = self._jac(d, hb, p)
-                a = ha[k] + cfg.hand_kp * (target.hand_pos[k] - p) + cfg.hand_kd * (hv[k] - Jp @ qd)
+                goal = target.hand_pos[k]
+                if target.hand_hold_body is not None and target.hand_hold_body[k] >= 0:  # follow a lagging object, pull it back at most hand_lead
+                    dev = d.xpos[int(target.hand_hold_body[k])] - target.hand_hold_ref[k]
+                    nd = float(np.linalg.norm(dev))
+                    if nd > cfg.hand_lead:
+                        goal = goal + dev * (1.0 - cfg.hand_lead / nd)
+                a = ha[k] + cfg.hand_kp * (goal - p) + cfg.hand_kd * (hv[k] - Jp @ qd)
                 task(Jp, a - bp, cfg.w_hand if target.hand_weight is None else float(target.hand_weight[k]))
                 if target.hand_rot is not None and target.hand_rot_weight[k] > 0:
                     err = orientation_error(target.hand_rot[k], d.xmat[hb].reshape(3, 3))

@@ -135,7 +135,8 @@ def test_schedule_squeezes_opposite_sides_of_the_box(scene):
     assert (g.body[held] == scene.object_body_id["box"]).all() and g.mu == pytest.approx(0.8)
     t = LIFT_END + 10  # fully grasped, lifted, at rest
     assert np.allclose(g.normal[t, 0], [0, -1, 0], atol=1e-3) and np.allclose(g.normal[t, 1], [0, 1, 0], atol=1e-3)
-    # hand points moved inward by their surface's distance to the box plus the squeeze depth, nothing else
+    # hand points moved inward by their surface's distance to the box plus the squeeze depth, and up onto the grip
+    # axis grip_above over the box's centre of mass (the reference hands are level with it), nothing else
     m, d = scene.model, mujoco.MjData(scene.model)
     adr = scene.object_qpos_adr["box"]
     d.qpos[:36], d.qpos[adr : adr + 7] = qpos[t], box[t]
@@ -145,7 +146,7 @@ def test_schedule_squeezes_opposite_sides_of_the_box(scene):
         centre = d.xpos[i] + d.xmat[i].reshape(3, 3) @ hand_offsets(m)[k]
         gap = mujoco.mj_geomDistance(m, d, hand_geoms(m)[k][0], m.geom("box_col0").id, 0.1, None)
         assert -0.005 < gap < 0.012  # the reference leaves the hands about 1 cm off the sides
-        assert np.allclose(g.point[t, k] - centre, (gap + cfg.depth) * g.normal[t, k], atol=1e-4)
+        assert np.allclose(g.point[t, k] - centre - [0, 0, cfg.grip_above], (gap + cfg.depth) * g.normal[t, k], atol=2e-3)
     # forces: squeezes cancel, the hands carry the weight once lifted, none before the lift
     assert np.allclose(g.force[t].sum(axis=0), [0, 0, BOX_MASS * 9.81], atol=0.05)
     assert g.force[t, 0, 1] < -cfg.min_normal_force + 1e-6 and g.friction_ok.all()
@@ -156,13 +157,30 @@ def test_schedule_squeezes_opposite_sides_of_the_box(scene):
     assert np.abs(g.force[a]).max() < 0.2 * np.abs(g.force[t]).max()
 
 
-def test_schedule_is_none_without_hand_contacts(scene):
+def test_without_hand_contacts_nothing_is_held_and_the_hands_are_kept_off(scene):
+    """No hand-contact labels: no hand holds the box, no force is planned; the reference hands that
+    close to 1 cm off its sides get targets moved out to ``clearance`` with weight ``w_clear``."""
     qpos, box, contacts = _lift_clip(scene)
     ref = build_reference(scene.model, qpos, 50)
-    assert grasp_schedule(scene, ref, LINKS, contacts & False, {"box": box}) is None
+    cfg = GraspConfig()
+    g = grasp_schedule(scene, ref, LINKS, contacts & False, {"box": box}, cfg)
+    assert not g.grasped.any() and not g.force.any()
+    t = LIFT_END + 10
+    assert g.clear[t].all() and (g.weight[t] == cfg.w_clear).all()
+    assert not g.clear[:REACH[0]].any()  # far from the box: the reference hand targets, untouched
+    m, d = scene.model, mujoco.MjData(scene.model)
+    adr = scene.object_qpos_adr["box"]
+    d.qpos[:36], d.qpos[adr : adr + 7] = qpos[t], box[t]
+    mujoco.mj_kinematics(m, d)
+    for k, hb in enumerate(HAND_BODIES):
+        i = m.body(hb).id
+        centre = d.xpos[i] + d.xmat[i].reshape(3, 3) @ hand_offsets(m)[k]
+        gap = mujoco.mj_geomDistance(m, d, hand_geoms(m)[k][0], m.geom("box_col0").id, 0.1, None)
+        assert gap < 0.02 and np.linalg.norm(g.point[t, k] - centre) == pytest.approx(cfg.clearance - gap, abs=0.005)
+        assert abs(g.point[t, k, 1]) > abs(centre[1])  # moved outward, away from the box's side
     one = contacts.copy()
-    one[:, 2] = False  # one hand alone does not grasp
-    assert grasp_schedule(scene, ref, LINKS, one, {"box": box}) is None
+    one[:, 2] = False  # one hand alone does not lift a box (it only pushes one along the floor)
+    assert not grasp_schedule(scene, ref, LINKS, one, {"box": box}, cfg).grasped.any()
 
 
 def _lift(scene, cfg: GraspConfig | None = GraspConfig()):
