@@ -25,7 +25,7 @@ object that lags its reference position by ``e`` with ``|e| > hand_lead`` moves 
 of running ahead and pushing the robot off its feet).
 
 Support comes from the schedule corrected by the simulation's contacts, and the swing foot lands
-where the divergent component of motion ``xi = c + c_dot / omega`` can be caught (:meth:`_adapt`:
+where the divergent component of motion ``xi = c + c_dot / omega`` can be caught (:meth:`physicalize.stepping.Stepping.adapt`:
 late and early touchdowns, capture-point step adjustment, the CoM target following the footholds
 taken); off while a seat or an object carries part of the weight.
 
@@ -37,13 +37,14 @@ clipped to the joint range (the actuators clip torque, the joints have their lim
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
 from qpsolvers import solve_qp
 
 from physicalize import wbc_rows
+from physicalize.stepping import Stepping
 from pipeline.robot import G1_JOINT_NAMES, NUM_JOINTS, ActuatorProfile
 from pipeline.scene import link_collision_geoms
 
@@ -205,7 +206,7 @@ class WholeBodyController:
         self.effort = profile.effort_limit
         self.q_lo, self.q_hi = model.jnt_range[[model.joint(j).id for j in G1_JOINT_NAMES]].T.copy()
         self._M = np.zeros((model.nv, model.nv))
-        self._landing_shift = np.zeros((2, 2))  # capture-point shift of each foot's last landing (controller state)
+        self.stepping = Stepping(CONTROL_DT)  # capture-point shift of each foot's last landing (controller state)
         self._jp, self._jr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
 
     # --- kinematics helpers ---------------------------------------------------------------------
@@ -262,7 +263,7 @@ class WholeBodyController:
         nv = NV_ROBOT
         tau_ext = self.external_forces(d)
         supported = tau_ext[2] > cfg.other_support * self.robot_mass * 9.81  # sitting, leaning: no stepping logic
-        target = self._adapt(d, target) if cfg.contact_stance and not supported else target
+        target = self.stepping.adapt(self, d, target) if cfg.contact_stance and not supported else target
         stance = [k for k in range(2) if target.stance[k]]
         nf = 12 * len(stance)
         n = nv + nf
@@ -405,81 +406,6 @@ class WholeBodyController:
     def limit_bounds(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Joint-acceleration bounds ``b_lo <= qdd <= b_hi`` (:func:`physicalize.wbc_rows.limit_bounds`)."""
         return wbc_rows.limit_bounds(self, q, qd)
-
-    def foot_contact_forces(self, d) -> np.ndarray:
-        """(2,) normal force of the floor on each foot, measured in the simulation [N]."""
-        out, f6 = np.zeros(2), np.zeros(6)
-        for i in range(d.ncon):
-            c = d.contact[i]
-            if self.floor not in (c.geom1, c.geom2):
-                continue
-            b = self.m.geom_bodyid[c.geom2 if c.geom1 == self.floor else c.geom1]
-            if b in self.feet:
-                mujoco.mj_contactForce(self.m, d, i, f6)
-                out[self.feet.index(b)] += f6[0]
-        return out
-
-    def dcm_error(self, d, target: Target) -> np.ndarray:
-        """Horizontal divergent-component-of-motion error ``xi - xi_ref`` with ``xi = c + c_dot / omega``,
-        ``omega = sqrt(g / z_c)`` (``z_c``: the target CoM height)."""
-        c, _, _, cd = self.com(d)
-        omega = np.sqrt(9.81 / max(float(target.com[2]), 0.3))
-        return (c[:2] + cd[:2] / omega) - (target.com[:2] + target.com_vel[:2] / omega)
-
-    def _adapt(self, d, target: Target) -> Target:
-        """The target with its support taken from the simulation and the swing foot's landing point
-        moved by the capture-point error:
-
-        * a scheduled stance foot that does not press the floor (< ``touch_force``) while the other
-          foot supports becomes a swing foot driven down onto its footstep (late touchdown);
-        * a scheduled swing foot pressing the floor whose reference sole is low (< ``touchdown_height``)
-          and not rising becomes a stance foot (early touchdown);
-        * a swing foot's target moves horizontally by ``step_gain (xi - xi_ref)`` (at most ``step_max``,
-          never closer than ``min_foot_gap`` sideways to the stance foot): where the robot's DCM runs
-          ahead of or beside the plan, the foot lands where the DCM can be caught;
-        * while a foot supports, the CoM target moves by ``com_anchor`` times the shift that foot landed
-          with (the plan follows the footholds taken: without it the plan kept pulling the CoM toward the
-          reference footsteps, the next landing was shifted further, and a 20 N side push diverged)."""
-        cfg = self.cfg
-        force = self.foot_contact_forces(d)
-        on = force > cfg.touch_force
-        stance = list(target.stance)
-        pos, vel, acc = target.foot_pos.copy(), target.foot_vel.copy(), target.foot_acc.copy()
-        sole = target.sole_height if target.sole_height is not None else np.full(2, np.inf)
-        for k in range(2):
-            if not stance[k] and on[k] and sole[k] < cfg.touchdown_height and target.foot_vel[k, 2] <= 0.0:
-                stance[k] = True
-        for k in range(2):
-            if stance[k] and not on[k] and stance[1 - k] and on[1 - k]:
-                stance[k] = False
-                vel[k, 2], acc[k] = -cfg.descend_speed, 0.0
-                pos[k, 2] = min(pos[k, 2], d.xpos[self.feet[k]][2]) - cfg.descend_speed * CONTROL_DT
-        com = target.com
-        if cfg.com_anchor > 0 and any(stance):  # the plan follows the footholds actually taken
-            held = [k for k in range(2) if stance[k]]
-            if held:
-                off = np.mean([self._landing_shift[k] for k in held], axis=0)
-                com = target.com.copy()
-                com[:2] += cfg.com_anchor * off
-                target = replace(target, com=com)
-        if stance.count(True) == 1 and cfg.step_gain > 0:
-            s, k = stance.index(True), stance.index(False)
-            shift = cfg.step_gain * self.dcm_error(d, target)
-            n = np.linalg.norm(shift)
-            if n > cfg.step_max:
-                shift *= cfg.step_max / n
-            p = pos[k, :2] + shift
-            R = d.xmat[self.feet[s]].reshape(3, 3)
-            lateral = np.array([-R[1, 0], R[0, 0]]) / max(np.hypot(R[0, 0], R[1, 0]), 1e-9)  # the stance foot's left
-            side = 1.0 if k == 0 else -1.0
-            gap = side * lateral @ (p - d.xpos[self.feet[s]][:2])
-            if gap < cfg.min_foot_gap:
-                p += side * (cfg.min_foot_gap - gap) * lateral
-            pos[k, :2] = p
-        for k in range(2):  # the step adjustment each foot landed with (kept while it supports)
-            if not stance[k]:
-                self._landing_shift[k] = pos[k, :2] - target.foot_pos[k, :2]
-        return replace(target, stance=(stance[0], stance[1]), foot_pos=pos, foot_vel=vel, foot_acc=acc)
 
     @staticmethod
     def _ref_rotation(target: Target, which: int) -> np.ndarray:
