@@ -21,6 +21,7 @@ import mujoco
 import numpy as np
 
 from physicalize.reference import Reference
+from physicalize.stepping import foot_floor_forces
 from physicalize.wbc import FOOT_BODIES, NV_ROBOT, WholeBodyController
 from pipeline.robot import NUM_JOINTS
 from pipeline.scene import Scene, link_collision_geoms
@@ -78,20 +79,6 @@ def fallen(d: mujoco.MjData, ref_pelvis_z: float, torso: int, ref_torso_quat: np
     return bool(d.qpos[2] < ref_pelvis_z - FALL_HEIGHT_DROP or float(up @ ref_up) < FALL_TILT_COS)
 
 
-def _foot_forces(m, d, feet: list[int], floor: int) -> np.ndarray:
-    out, f6 = np.zeros(2), np.zeros(6)
-    for i in range(d.ncon):
-        c = d.contact[i]
-        if floor not in (c.geom1, c.geom2):
-            continue
-        other = c.geom2 if c.geom1 == floor else c.geom1
-        b = m.geom_bodyid[other]
-        if b in feet:
-            mujoco.mj_contactForce(m, d, i, f6)
-            out[feet.index(b)] += (c.frame.reshape(3, 3).T @ f6[:3])[2] * (1 if c.geom1 == floor else -1)
-    return out
-
-
 def _link_contacts(m, d, link_geoms: list[set[int]], object_geoms: set[int]) -> np.ndarray:
     out = np.zeros(len(link_geoms), bool)
     for i in range(d.ncon):
@@ -125,7 +112,7 @@ def simulate(scene: Scene, ref: Reference, controller: WholeBodyController, qpos
         mujoco.mj_forward(m, d)
         rec["qpos"].append(d.qpos.copy())
         rec["qvel"].append(d.qvel.copy())
-        rec["foot_force"].append(_foot_forces(m, d, feet, floor))
+        rec["foot_force"].append(foot_floor_forces(m, d, feet, floor))
         rec["contact"].append(_link_contacts(m, d, link_geoms, object_geoms))
         sol = controller.solve(d, ref.target(t))
         fails += not sol.ok

@@ -19,17 +19,18 @@ if TYPE_CHECKING:
     from physicalize.wbc import Target, WholeBodyController
 
 
-def foot_contact_forces(ctrl: WholeBodyController, d: mujoco.MjData) -> np.ndarray:
-    """(2,) normal force of the floor on each foot, measured in the simulation [N]."""
+def foot_floor_forces(m: mujoco.MjModel, d: mujoco.MjData, feet: list[int], floor: int) -> np.ndarray:
+    """(2,) normal force of the floor on each of the ``feet`` bodies, measured in the simulation [N]
+    (the floor is a plane: its contact normals are vertical)."""
     out, f6 = np.zeros(2), np.zeros(6)
     for i in range(d.ncon):
         c = d.contact[i]
-        if ctrl.floor not in (c.geom1, c.geom2):
+        if floor not in (c.geom1, c.geom2):
             continue
-        b = ctrl.m.geom_bodyid[c.geom2 if c.geom1 == ctrl.floor else c.geom1]
-        if b in ctrl.feet:
-            mujoco.mj_contactForce(ctrl.m, d, i, f6)
-            out[ctrl.feet.index(b)] += f6[0]
+        b = m.geom_bodyid[c.geom2 if c.geom1 == floor else c.geom1]
+        if b in feet:
+            mujoco.mj_contactForce(m, d, i, f6)
+            out[feet.index(b)] += f6[0]
     return out
 
 
@@ -63,7 +64,7 @@ class Stepping:
           with (the plan follows the footholds taken: without it the plan kept pulling the CoM toward the
           reference footsteps, the next landing was shifted further, and a 20 N side push diverged)."""
         cfg = ctrl.cfg
-        force = foot_contact_forces(ctrl, d)
+        force = foot_floor_forces(ctrl.m, d, ctrl.feet, ctrl.floor)
         on = force > cfg.touch_force
         stance = list(target.stance)
         pos, vel, acc = target.foot_pos.copy(), target.foot_vel.copy(), target.foot_acc.copy()
