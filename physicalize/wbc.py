@@ -81,17 +81,14 @@ class WBCConfig:
     w_posture: float = 1.0
     w_qdd: float = 1e-4
     w_force: float = 1e-5
-    corner_lift: float = 0.0  # m: > 0: a stance-foot sole corner this high above the floor gets f = 0 (not all four); 0.01 measured: walk penetration 0.030 -> 0.021 but SitStand fell at 395 of 471
     effort_scale: float = 0.95  # the QP's torque bounds as a fraction of the actuators' effort limits (1.0: 31% of walk frames saturated)
     joint_limits: bool = True  # the joint-range rows below (False: the QP knows no joint range)
-    limit_rate: float = 15.0  # alpha [1/s] of the joint-range barrier (see WholeBodyController.limit_bounds)
+    limit_rate: float = 15.0  # alpha [1/s] of the joint-range barrier (see physicalize.wbc_rows.limit_bounds)
     limit_zeta: float = 1.0  # damping ratio of the barrier (1: critically damped)
     limit_margin: float = 0.01  # the barrier keeps joints this far [rad] inside their MuJoCo range
-    limit_stance_legs: bool = True  # range rows also on the joints of a stance leg (else swing legs, waist, arms)
     limit_active: float = 300.0  # a range row enters the QP when its bound on |qdd| is under this [rad/s^2]
-    touchdown_rate: float = 25.0  # a [1/s] of the swing-foot touchdown rows (0: none; see soft_rows)
-    touchdown_depth: float = 0.015  # m below the floor that barrier aims at (0 would never touch down)
-    touchdown_speed: float = 0.8  # m/s (0.5 fell in test_gait's -y push while walking): a descent-speed cap zdd >= -a (zd + speed); 0: the barrier towards -touchdown_depth
+    touchdown_rate: float = 25.0  # a [1/s] of the swing-foot touchdown rows (0: none; see physicalize.wbc_rows.soft_rows)
+    touchdown_speed: float = 0.8  # m/s (0.5 fell in test_gait's -y push while walking): a descent-speed cap zdd >= -a (zd + speed)
     touchdown_zone: float = 0.10  # m: sole corners higher than this get no row
     hand_lead: float = 0.05  # m: a held object farther than this from its reference position takes the hand targets along (the rest stays a bounded push towards the reference)
     w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
@@ -361,22 +358,12 @@ class WholeBodyController:
                 Gc[5 * j : 5 * j + 5, nv + 3 * j : nv + 3 * j + 3] = cone
             G.append(Gc)
             hv.append(np.zeros(5 * nc))
-            if cfg.corner_lift > 0:  # a stance corner clear of the floor in the simulation carries no force
-                for s_, k in enumerate(stance):
-                    fb = self.feet[k]
-                    z = d.xpos[fb][2] + (self.corners[k] @ d.xmat[fb].reshape(3, 3).T)[:, 2]
-                    lifted = np.flatnonzero(z > cfg.corner_lift)
-                    if 0 < lifted.size < 4:
-                        Gz = np.zeros((lifted.size, n))
-                        Gz[np.arange(lifted.size), nv + 12 * s_ + 3 * lifted + 2] = 1.0
-                        G.append(Gz)
-                        hv.append(np.zeros(lifted.size))
         Tq = np.hstack([M[6:], -Jcorner[:, 6:].T])  # tau = Tq x + h_a - tau_ext_a
         ta = h[6:] - tau_ext[6:]
         G += [Tq, -Tq]
         hv += [cfg.effort_scale * self.effort - ta, cfg.effort_scale * self.effort + ta]
         G, hv = np.vstack(G), np.concatenate(hv)
-        Gs, hs = self.soft_rows(d, target, stance)
+        Gs, hs = wbc_rows.soft_rows(self, d, target, stance)
         ns = len(hs)
         if ns:  # soft rows  Gs qdd - s <= hs  with slack s >= 0 (weight w_limit_slack): the QP stays feasible
             Gl = np.zeros((2 * ns, n + ns))
@@ -398,14 +385,6 @@ class WholeBodyController:
         qdd, f = x[:nv], x[nv:]
         tau = np.clip(Tq @ x + ta, -self.effort, self.effort)
         return Solution(qdd, f.reshape(-1, 3), tau, self.action(d, qdd, tau), ok)
-
-    def soft_rows(self, d, target: Target, stance: list[int]) -> tuple[np.ndarray, np.ndarray]:
-        """Joint-range and touchdown rows ``G qdd <= h`` kept with a slack (:func:`physicalize.wbc_rows.soft_rows`)."""
-        return wbc_rows.soft_rows(self, d, target, stance)
-
-    def limit_bounds(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Joint-acceleration bounds ``b_lo <= qdd <= b_hi`` (:func:`physicalize.wbc_rows.limit_bounds`)."""
-        return wbc_rows.limit_bounds(self, q, qd)
 
     @staticmethod
     def _ref_rotation(target: Target, which: int) -> np.ndarray:
