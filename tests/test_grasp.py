@@ -96,6 +96,20 @@ def _lift_clip(scene):
     return qpos, box, contacts
 
 
+def _hand_centres_and_gaps(scene, qpos: np.ndarray, box_pose: np.ndarray) -> list[tuple[np.ndarray, float]]:
+    """Per hand at one frame: the grasp's tracked point on the hand (world) and its capsule's distance to the box."""
+    m, d = scene.model, mujoco.MjData(scene.model)
+    adr = scene.object_qpos_adr["box"]
+    d.qpos[:36], d.qpos[adr : adr + 7] = qpos, box_pose
+    mujoco.mj_kinematics(m, d)
+    out = []
+    for k, hb in enumerate(HAND_BODIES):
+        i = m.body(hb).id
+        out.append((d.xpos[i] + d.xmat[i].reshape(3, 3) @ hand_offsets(m)[k],
+                    mujoco.mj_geomDistance(m, d, hand_geoms(m)[k][0], m.geom("box_col0").id, 0.1, None)))
+    return out
+
+
 def test_contact_friction_follows_mujoco_priority(scene):
     """The hand (condim 1, priority 0) on the box (condim 3, priority 2, mu 0.8): the box's rules,
     as MuJoCo's own contact reports."""
@@ -137,14 +151,7 @@ def test_schedule_squeezes_opposite_sides_of_the_box(scene):
     assert np.allclose(g.normal[t, 0], [0, -1, 0], atol=1e-3) and np.allclose(g.normal[t, 1], [0, 1, 0], atol=1e-3)
     # hand points moved inward by their surface's distance to the box plus the squeeze depth, and up onto the grip
     # axis grip_above over the box's centre of mass (the reference hands are level with it), nothing else
-    m, d = scene.model, mujoco.MjData(scene.model)
-    adr = scene.object_qpos_adr["box"]
-    d.qpos[:36], d.qpos[adr : adr + 7] = qpos[t], box[t]
-    mujoco.mj_kinematics(m, d)
-    for k, hb in enumerate(HAND_BODIES):
-        i = m.body(hb).id
-        centre = d.xpos[i] + d.xmat[i].reshape(3, 3) @ hand_offsets(m)[k]
-        gap = mujoco.mj_geomDistance(m, d, hand_geoms(m)[k][0], m.geom("box_col0").id, 0.1, None)
+    for k, (centre, gap) in enumerate(_hand_centres_and_gaps(scene, qpos[t], box[t])):
         assert -0.005 < gap < 0.012  # the reference leaves the hands about 1 cm off the sides
         assert np.allclose(g.point[t, k] - centre - [0, 0, cfg.grip_above], (gap + cfg.depth) * g.normal[t, k], atol=2e-3)
     # forces: squeezes cancel, the hands carry the weight once lifted, none before the lift
@@ -168,14 +175,7 @@ def test_without_hand_contacts_nothing_is_held_and_the_hands_are_kept_off(scene)
     t = LIFT_END + 10
     assert g.clear[t].all() and (g.weight[t] == cfg.w_clear).all()
     assert not g.clear[:REACH[0]].any()  # far from the box: the reference hand targets, untouched
-    m, d = scene.model, mujoco.MjData(scene.model)
-    adr = scene.object_qpos_adr["box"]
-    d.qpos[:36], d.qpos[adr : adr + 7] = qpos[t], box[t]
-    mujoco.mj_kinematics(m, d)
-    for k, hb in enumerate(HAND_BODIES):
-        i = m.body(hb).id
-        centre = d.xpos[i] + d.xmat[i].reshape(3, 3) @ hand_offsets(m)[k]
-        gap = mujoco.mj_geomDistance(m, d, hand_geoms(m)[k][0], m.geom("box_col0").id, 0.1, None)
+    for k, (centre, gap) in enumerate(_hand_centres_and_gaps(scene, qpos[t], box[t])):
         assert gap < 0.02 and np.linalg.norm(g.point[t, k] - centre) == pytest.approx(cfg.clearance - gap, abs=0.005)
         assert abs(g.point[t, k, 1]) > abs(centre[1])  # moved outward, away from the box's side
     one = contacts.copy()
