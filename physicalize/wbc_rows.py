@@ -1,7 +1,11 @@
 """The whole-body QP's soft inequality rows (called by :meth:`physicalize.wbc.WholeBodyController.solve`):
 joint-range barriers and swing-foot touchdown speed caps, ``G qdd <= h``, each kept with a slack
 ``s >= 0`` of weight ``w_limit_slack`` so that the QP stays feasible where a row cannot hold
-(``G qdd - s <= h``). ``ctrl`` is the :class:`~physicalize.wbc.WholeBodyController`."""
+(``G qdd - s <= h``). ``ctrl`` is the :class:`~physicalize.wbc.WholeBodyController`.
+
+Measured and not kept: range rows only off the stance legs (violations up to 0.197 of frames
+remained); zero force on stance sole corners more than 1 cm above the floor (walk penetration
+0.030 -> 0.021 m, but the frames before a fall over the 7 benchmark clips fell 1440 -> 1228)."""
 
 from __future__ import annotations
 
