@@ -205,12 +205,13 @@ class ReferenceIK:
         self.config_limit = mink.ConfigurationLimit(model)
         self.knee_limit = MinimumJointLimit(model, {"left_knee_joint": cfg.min_knee, "right_knee_joint": cfg.min_knee})
         self.velocity_limit = FrameVelocityLimit(model, joint_velocity_limits(cfg.velocity_limit_factor), dt=1.0 / 50.0)
-        self.collision = [SeparationLimit(model, self_collision_groups(model), skip_kept_apart=True, gain=cfg.collision_gain,
+        groups = self_collision_groups(model)
+        self.collision = [SeparationLimit(model, groups, skip_kept_apart=True, gain=cfg.collision_gain,
                                           minimum_distance_from_collisions=cfg.self_min_distance,
                                           collision_detection_distance=cfg.collision_detection_distance)] if cfg.self_collision else []  # fmt: skip
         robot_root = model.body("pelvis").id
         object_geoms = [g for g in range(model.ngeom) if model.geom_contype[g] and model.geom_bodyid[g] and model.body_rootid[model.geom_bodyid[g]] != robot_root]
-        self.object_limit = [SeparationLimit(model, [(self_collision_groups(model)[0][0], object_geoms)], gain=cfg.collision_gain,
+        self.object_limit = [SeparationLimit(model, [(groups[0][0], object_geoms)], gain=cfg.collision_gain,
                                              minimum_distance_from_collisions=cfg.object_min_distance,
                                              collision_detection_distance=cfg.collision_detection_distance)] if cfg.object_collision and object_geoms else []  # fmt: skip
         self._objects_on = False
