@@ -54,6 +54,7 @@ from scipy.spatial.transform import Rotation
 from physicalize.plan import plan_com
 from physicalize.reference import Reference, build_reference
 from physicalize.wbc import FOOT_BODIES, HAND_BODIES, NV_ROBOT, sole_corners
+from pipeline.foot_contact import runs
 from retarget.ik import FrameVelocityLimit
 from retarget.ik_config import SeparationLimit, joint_velocity_limits, self_collision_groups
 
@@ -111,12 +112,6 @@ class MinimumJointLimit(mink.Limit):
         return Constraint(G=self._G, h=np.maximum(configuration.q[self._qadr] - self._lower, 0.0))
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """``[(start, stop)]`` of the True runs of a 1-D boolean array."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
-
-
 def _yaw_rotation(quat_wxyz: np.ndarray) -> Rotation:
     w, x, y, z = quat_wxyz
     return Rotation.from_euler("z", np.arctan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z)))
@@ -155,7 +150,7 @@ def foot_targets(ref: Reference, sole_z: np.ndarray, tolerance: float = 0.02) ->
     for k in range(2):
         speed = np.linalg.norm(np.gradient(ref.foot_pos[:, k, :2], dt, axis=0), axis=-1) if T > 1 else np.zeros(T)
         steps = []  # (first planted frame, stop, footstep position, footstep rotation)
-        for s, e in _runs(ref.stance[:, k]):
+        for s, e in runs(ref.stance[:, k]):
             i = s + int(np.argmin(speed[s:e]))
             p = np.array([ref.foot_pos[i, k, 0], ref.foot_pos[i, k, 1], -sole_z[k]])
             near = np.linalg.norm(ref.foot_pos[s:e, k, :2] - p[:2], axis=1) <= tolerance

@@ -66,9 +66,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from pipeline.foot_contact import keep_runs
+from pipeline.foot_contact import keep_runs, runs
 from pipeline.scene import Scene, link_collision_geoms, nearest_geom_pair
-from physicalize.wbc import HAND_BODIES, Target
+from physicalize.wbc import HAND_BODIES, Target, quat_mat
 
 GRAVITY = 9.81
 
@@ -168,17 +168,12 @@ def hand_offsets(model: mujoco.MjModel) -> np.ndarray:
     return out
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
-
-
 def _ramp(mask: np.ndarray, n: int) -> np.ndarray:
     """Per frame in [0, 1]: 0 off the mask, rising/falling linearly over ``n`` frames at each run end
     inside the clip (a grasp the clip starts or ends with is held there at full strength)."""
     s = np.zeros(len(mask))
     big = len(mask) + n
-    for a, b in _runs(mask):
+    for a, b in runs(mask):
         k = np.arange(b - a)
         up = k + 1 if a > 0 else np.full(b - a, big)
         down = b - a - k if b < len(mask) else np.full(b - a, big)
@@ -192,12 +187,6 @@ def normal_force(load: np.ndarray, n: np.ndarray, mu: float, cfg: GraspConfig) -
     tangential = float(np.linalg.norm(load - (load @ n) * n))
     N = float(np.clip(max(cfg.min_normal_force, cfg.safety * tangential / mu), 0.0, cfg.max_normal_force))
     return N, mu * N >= tangential - 1e-9
-
-
-def _quat_rot(q: np.ndarray) -> np.ndarray:
-    R = np.empty(9)
-    mujoco.mju_quat2Mat(R, q)
-    return R.reshape(3, 3)
 
 
 def _label_runs(key: np.ndarray) -> list[tuple[int, int, int]]:
@@ -279,7 +268,7 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
                 t0 = int(both_in[np.argmin(np.abs(near_d[both_in]).sum(axis=1))])
             else:
                 t0 = int(win[np.argmin(np.abs(near_d[win, k]))])
-            R0 = _quat_rot(pose[t0, 3:7])
+            R0 = quat_mat(pose[t0, 3:7])
             c0 = centre[t0, k].copy()
             if both_in.size:  # both hand points on one line along the grip normal (else the squeezes make a couple that spins the object)
                 n = near_n[t0, 0] - near_n[t0, 1]
@@ -290,7 +279,7 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
                 c0 = axis + ((c0 - axis) @ n) * n
             c_o, n_o = R0.T @ (c0 - pose[t0, :3]), R0.T @ near_n[t0, k]
             for t in range(a, b):
-                R = _quat_rot(pose[t, 3:7])
+                R = quat_mat(pose[t, 3:7])
                 normal[t, k] = R @ n_o
                 gap[t, k] = near_d[t0, k]
                 point[t, k] = (1 - s[t, k]) * centre[t, k] + s[t, k] * (pose[t, :3] + R @ c_o)
@@ -379,7 +368,7 @@ def _pushed(pose: np.ndarray, cfg: GraspConfig) -> bool:
 
 def _dilate(mask: np.ndarray, n: int) -> np.ndarray:
     out = mask.copy()
-    for a, b in _runs(mask):
+    for a, b in runs(mask):
         out[max(0, a - n) : b + n] = True
     return out
 
@@ -403,7 +392,7 @@ def seat_ramp(contact_links: tuple[str, ...], contacts: np.ndarray | None, frame
         return None
     n = cfg.seat_ramp_frames
     out = np.zeros(frames)
-    for a, b in _runs(seat):  # ramp in before the seat is reached and out after it is left
+    for a, b in runs(seat):  # ramp in before the seat is reached and out after it is left
         lo, hi = max(0, a - n), min(frames, b + cfg.seat_release_lag)
         t = np.arange(lo, hi)
         out[lo:hi] = np.maximum(out[lo:hi], np.clip(np.minimum((t - (a - n)) / n, (hi - t) / n), 0.0, 1.0))

@@ -51,7 +51,7 @@ from tensordict import TensorDict
 
 from physicalize.reference import Reference
 from physicalize.rollout import SUBSTEPS, fallen
-from physicalize.wbc import FOOT_BODIES, NV_ROBOT, WholeBodyController
+from physicalize.wbc import FOOT_BODIES, NV_ROBOT, WholeBodyController, quat_mat
 from pipeline.clip import RobotClip
 from pipeline.robot import NUM_JOINTS
 
@@ -96,12 +96,6 @@ class ResidualConfig:
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items() if k in names})
 
 
-def _mat(quat: np.ndarray) -> np.ndarray:
-    R = np.empty(9)
-    mujoco.mju_quat2Mat(R, quat)
-    return R.reshape(3, 3)
-
-
 def _rot6(R: np.ndarray) -> np.ndarray:
     return R[:, :2].T.ravel()
 
@@ -111,15 +105,15 @@ def observe(d: mujoco.MjData, ref: Reference, t: int, base_action: np.ndarray, c
     model's first tree (qpos 0..35); the first free object, if any, is at qpos 36..42."""
     T = ref.frames
     t = min(max(t, 0), T - 1)
-    p, R = d.qpos[:3], _mat(d.qpos[3:7])
+    p, R = d.qpos[:3], quat_mat(d.qpos[3:7])
     q = d.qpos[7 : 7 + NUM_JOINTS]
     parts = [q, d.qvel[6:NV_ROBOT], R.T @ np.array([0.0, 0.0, -1.0]), d.qvel[3:6], p[2:3], base_action - q]
     for k in (0, *cfg.lookahead):
         r = ref.qpos[min(t + k, T - 1)]
-        parts += [r[7:], R.T @ (r[:3] - p), _rot6(R.T @ _mat(r[3:7]))]
+        parts += [r[7:], R.T @ (r[:3] - p), _rot6(R.T @ quat_mat(r[3:7]))]
     if d.qpos.shape[0] >= 43:
         o = d.qpos[36:43]
-        parts += [R.T @ (o[:3] - p), _rot6(R.T @ _mat(o[3:7])), np.ones(1)]
+        parts += [R.T @ (o[:3] - p), _rot6(R.T @ quat_mat(o[3:7])), np.ones(1)]
     else:
         parts.append(np.zeros(10))
     parts += [np.array([t / max(T - 1, 1)]), ref.stance[t].astype(float)]

@@ -22,7 +22,7 @@ import numpy as np
 
 from physicalize.reference import Reference
 from physicalize.stepping import foot_floor_forces
-from physicalize.wbc import FOOT_BODIES, NV_ROBOT, WholeBodyController
+from physicalize.wbc import FOOT_BODIES, NV_ROBOT, WholeBodyController, quat_mat
 from pipeline.robot import NUM_JOINTS
 from pipeline.scene import Scene, link_collision_geoms
 
@@ -71,11 +71,7 @@ def fallen(d: mujoco.MjData, ref_pelvis_z: float, torso: int, ref_torso_quat: np
     from the reference torso's (``ref_torso_quat``, wxyz; None: from the vertical). Relative tilt: a
     reference that bends over a table or a box (> 60 degrees) is not a fall when tracked."""
     up = d.xmat[torso].reshape(3, 3)[:, 2]
-    ref_up = np.array([0.0, 0.0, 1.0])
-    if ref_torso_quat is not None:
-        R = np.empty(9)
-        mujoco.mju_quat2Mat(R, ref_torso_quat)
-        ref_up = R.reshape(3, 3)[:, 2]
+    ref_up = np.array([0.0, 0.0, 1.0]) if ref_torso_quat is None else quat_mat(ref_torso_quat)[:, 2]
     return bool(d.qpos[2] < ref_pelvis_z - FALL_HEIGHT_DROP or float(up @ ref_up) < FALL_TILT_COS)
 
 

@@ -180,7 +180,8 @@ def orientation_error(R_ref: np.ndarray, R: np.ndarray) -> np.ndarray:
     return v
 
 
-def _quat_mat(q: np.ndarray) -> np.ndarray:
+def quat_mat(q: np.ndarray) -> np.ndarray:
+    """The rotation matrix (3, 3) of a unit quaternion ``q`` (wxyz)."""
     R = np.empty(9)
     mujoco.mju_quat2Mat(R, q)
     return R.reshape(3, 3)
@@ -299,7 +300,7 @@ class WholeBodyController:
                 Jfeet[k] = (J6, a - b6)
             else:
                 ep = target.foot_pos[k] - d.xpos[fb]
-                er = orientation_error(_quat_mat(target.foot_quat[k]), R)
+                er = orientation_error(quat_mat(target.foot_quat[k]), R)
                 a = np.concatenate([cfg.swing_ff * target.foot_acc[k] + cfg.foot_kp * ep + cfg.foot_kd * (target.foot_vel[k] - v6[:3]), cfg.orient_kp * er - cfg.orient_kd * v6[3:]])
                 task(J6, a - b6, cfg.w_swing)
         if target.hand_pos is not None:  # hand point tasks; a held object's planned reaction -J^T f in tau_ext
@@ -388,7 +389,7 @@ class WholeBodyController:
 
     @staticmethod
     def _ref_rotation(target: Target, which: int) -> np.ndarray:
-        return _quat_mat(target.torso_quat if which == 1 and target.torso_quat is not None else target.qpos[3:7])
+        return quat_mat(target.torso_quat if which == 1 and target.torso_quat is not None else target.qpos[3:7])
 
     def action(self, d, qdd: np.ndarray, tau: np.ndarray, hold: float = CONTROL_DT) -> np.ndarray:
         """PD joint targets that produce ``tau`` at the predicted mid-hold state."""

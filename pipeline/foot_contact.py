@@ -118,6 +118,12 @@ def find_foot_joints(joint_names: tuple[str, ...] | list[str]) -> dict[str, tupl
     return found
 
 
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``[(start, stop)]`` of the True runs of a 1-D boolean array (``stop`` exclusive)."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(mask).astype(np.int8), [0]])))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
 def keep_runs(flags: np.ndarray, min_len: int, value: bool) -> np.ndarray:
     """``flags`` with runs of ``value`` shorter than ``min_len`` frames flipped.
 

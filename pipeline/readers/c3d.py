@@ -27,6 +27,7 @@ import numpy as np
 
 from pipeline.clip import HumanClip, Skeleton
 from pipeline.errors import InputError
+from pipeline.foot_contact import runs
 from pipeline.readers.keypoints import UNIT_SCALE, up_matrix
 
 _UNITS = {"mm": "mm", "millimeters": "mm", "cm": "cm", "m": "m", "meters": "m"}
@@ -73,12 +74,6 @@ def _up(c, up: str, src: str) -> str:
     return "y" if screen in ("+Y", "Y") else "z"
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """``[start, stop)`` runs of True in a 1-D boolean array."""
-    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
-
-
 def fill_gaps(xyz: np.ndarray, missing: np.ndarray) -> np.ndarray:
     """Linear interpolation over missing frames of one ``[T, 3]`` track (edges hold)."""
     t = np.arange(len(xyz))
@@ -121,12 +116,12 @@ def read_c3d(path: str | Path, *, up: str = "auto", max_gap: float = 0.25, long_
         miss = missing[:, m]
         if miss.all():
             raise InputError(src, f"marker {name}", "has no valid sample in any frame (all gap)")
-        runs = [(a, b) for a, b in _runs(miss) if b - a > limit]
-        if runs and long_gaps == "error":
-            a, b = runs[0]
+        gaps = [(a, b) for a, b in runs(miss) if b - a > limit]
+        if gaps and long_gaps == "error":
+            a, b = gaps[0]
             raise InputError(src, f"marker {name}", f"gap of {b - a} frames ({a}-{b - 1}) is longer than max_gap {max_gap} s", frame=int(a))
-        long_runs += [f"{name} {a}-{b - 1}" for a, b in runs]
-        if runs and long_gaps == "drop":
+        long_runs += [f"{name} {a}-{b - 1}" for a, b in gaps]
+        if gaps and long_gaps == "drop":
             continue
         if miss.any():
             xyz[:, m] = fill_gaps(xyz[:, m], miss)
