@@ -81,10 +81,9 @@ class ClipResult:
 
 
 def _scene_for(clip: RobotClip, profile: str):
-    from pipeline.geometry import ObjectPhysics
     from pipeline.scene import SceneObject, build_scene
 
-    return build_scene([SceneObject(o.name, o.geometry, ObjectPhysics(mass=o.mass or 2.0), pose=tuple(o.pose[0])) for o in clip.objects], profile)
+    return build_scene([SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in clip.objects], profile)
 
 
 REFERENCES = ("raw", "planned", "feasible")
@@ -196,6 +195,7 @@ def _cache_key(clip: RobotClip, index: int, teacher: str, profile: str) -> str:
     h = hashlib.sha256(np.ascontiguousarray(clip.qpos).tobytes())
     for o in clip.objects:
         h.update(np.ascontiguousarray(o.pose).tobytes())
+        h.update(f"{o.mass}|{o.friction}".encode())
     h.update(f"{clip.source}|{index}|{teacher}|{parse_teacher(teacher).digest}|{profile}".encode())
     return h.hexdigest()[:16]
 

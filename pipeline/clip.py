@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from pipeline.errors import InputError, first_bad_frame
-from pipeline.geometry import ObjectGeometry
+from pipeline.geometry import ObjectGeometry, ObjectPhysics
 from pipeline.rotations import slerp_wxyz
 
 QPOS_DIM = 36
@@ -104,7 +104,8 @@ class Skeleton:
 
 @dataclass(frozen=True)
 class ObjectTrack:
-    """One rigid object over a clip: its geometry, a ``(T,7)`` world pose, optional ``(T,)`` contact flags."""
+    """One rigid object over a clip: its geometry, a ``(T,7)`` world pose, optional ``(T,)`` contact flags,
+    and optional physical properties (``None``: :class:`~pipeline.geometry.ObjectPhysics`'s defaults)."""
 
     name: str
     geometry: ObjectGeometry
@@ -112,6 +113,7 @@ class ObjectTrack:
     contact: np.ndarray | None = None
     mass: float | None = None
     source: str = ""
+    friction: float | None = None  # sliding friction coefficient against anything it touches (the object's geoms win MuJoCo's mixing)
 
     def __post_init__(self):
         pose = check_array(self.pose, (None, 7), f"object {self.name} pose", self.source)
@@ -122,10 +124,19 @@ class ObjectTrack:
             if c.shape[0] != pose.shape[0]:
                 raise InputError(self.source, f"object {self.name} contact", f"has {c.shape[0]} frames, pose has {pose.shape[0]}")
             object.__setattr__(self, "contact", c)
+        for key in ("mass", "friction"):
+            v = getattr(self, key)
+            if v is not None and not (np.isfinite(v) and v > 0):
+                raise InputError(self.source, f"object {self.name} {key}", f"must be a positive number, got {v!r}")
 
     @property
     def frames(self) -> int:
         return self.pose.shape[0]
+
+    def physics(self) -> ObjectPhysics:
+        """The scene properties of this object: its own mass and friction where known, else the defaults."""
+        default = ObjectPhysics()
+        return ObjectPhysics(mass=self.mass or default.mass, friction=self.friction or default.friction)
 
     def resampled(self, fps: float, new_fps: float) -> "ObjectTrack":
         t, nt = _resample_times(self.frames, fps, new_fps)

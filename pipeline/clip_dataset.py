@@ -133,7 +133,7 @@ def _object_data(clip, with_contact: set[str]) -> tuple[dict, list[dict]]:
         data[f"object.{o.name}.pose"] = o.pose
         if o.name in with_contact:
             data[f"object.{o.name}.contact"] = np.zeros(o.frames, bool) if o.contact is None else o.contact
-        meta.append({"name": o.name, "geometry": geometry_to_dict(o.geometry), "mass": o.mass, "source": o.source,
+        meta.append({"name": o.name, "geometry": geometry_to_dict(o.geometry), "mass": o.mass, "friction": o.friction, "source": o.source,
                      "has_contact": o.contact is not None})  # fmt: skip
     return data, meta
 
@@ -144,7 +144,7 @@ def _objects_back(ep: Episode, source: str) -> tuple[ObjectTrack, ...]:
         c = ep.data.get(f"object.{m['name']}.contact")
         contact = c[:, 0].astype(bool) if c is not None and m.get("has_contact") else None
         pose = ep.data[f"object.{m['name']}.pose"].astype(np.float64)
-        out.append(ObjectTrack(m["name"], geometry_from_dict(m["geometry"]), pose, contact, m.get("mass"), m.get("source", source)))
+        out.append(ObjectTrack(m["name"], geometry_from_dict(m["geometry"]), pose, contact, m.get("mass"), m.get("source", source), m.get("friction")))
     return tuple(out)
 
 

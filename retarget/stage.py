@@ -27,7 +27,6 @@ from tqdm import tqdm
 
 from pipeline.clip import HumanClip, RobotClip
 from pipeline.errors import InputError
-from pipeline.geometry import ObjectPhysics
 from pipeline.scene import SceneObject, build_scene
 
 FPS = 50
@@ -73,7 +72,7 @@ def retarget_clip(clip: HumanClip, *, height_override: float | None = None, mapp
     link_map = _link_map(human, mapping)
     links, contacts = link_contact_flags(human, link_map)
     targets = replace(targets, contact_links=links, object_contact=contacts if objects else None)
-    scene = build_scene([SceneObject(o.name, o.geometry, ObjectPhysics(mass=o.mass or 2.0), pose=tuple(o.pose[0])) for o in objects])
+    scene = build_scene([SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in objects])
     ik = G1Retargeter(scene)
     qpos = ik.retarget(targets, {o.name: o.pose for o in objects}, source=human.source)
     objects = tuple(replace(o, pose=ik.objects_pose[o.name]) for o in objects)  # moved clear of planted feet

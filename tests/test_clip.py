@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.clip import HumanClip, ObjectTrack, RobotClip, Skeleton
 from pipeline.errors import InputError
-from pipeline.geometry import Primitive, geometry_from_dict, geometry_to_dict, Chair, MeshGeometry
+from pipeline.geometry import Primitive, geometry_from_dict, geometry_to_dict, Chair, MeshGeometry, ObjectPhysics
 from pipeline.rotations import wxyz_from_rotation
 
 SKEL = Skeleton(("pelvis", "spine", "head"), (-1, 0, 1))
@@ -68,6 +68,16 @@ def test_object_frame_count_must_match():
     track = ObjectTrack("box", BOX, np.tile([0, 0, 0, 1.0, 0, 0, 0], (4, 1)))
     with pytest.raises(InputError, match="object box pose: has 4 frames, joint_pos has 10"):
         _human(objects=(track,))
+
+
+def test_object_physics_defaults_and_validation():
+    pose = np.tile([0, 0, 0, 1.0, 0, 0, 0], (4, 1))
+    assert ObjectTrack("box", BOX, pose).physics() == ObjectPhysics()
+    assert ObjectTrack("box", BOX, pose, mass=20.0, friction=0.15).physics() == ObjectPhysics(mass=20.0, friction=0.15)
+    with pytest.raises(InputError, match=r"clip\.pt: object box friction: must be a positive number, got -0\.1"):
+        ObjectTrack("box", BOX, pose, source="clip.pt", friction=-0.1)
+    with pytest.raises(InputError, match="object box mass: must be a positive number, got nan"):
+        ObjectTrack("box", BOX, pose, mass=float("nan"))
 
 
 def test_robot_clip_validation():

@@ -37,7 +37,7 @@ def _qpos(T, seed):
 def _box(T, seed, contact=True):
     pose = np.tile([0.5, 0.0, 0.4, 1.0, 0.0, 0.0, 0.0], (T, 1))
     pose[:, 0] += 0.01 * np.arange(T)
-    return ObjectTrack("box", Primitive("box", (0.2, 0.15, 0.1)), pose, (np.arange(T) % 3 == 0) if contact else None, 2.5, f"box{seed}.obj")
+    return ObjectTrack("box", Primitive("box", (0.2, 0.15, 0.1)), pose, (np.arange(T) % 3 == 0) if contact else None, 2.5, f"box{seed}.obj", 0.3)
 
 
 def _chair(T):
@@ -58,7 +58,7 @@ def _assert_robot_equal(a: RobotClip, b: RobotClip):
     assert (a.contacts is None) == (b.contacts is None) and (a.contacts is None or np.array_equal(a.contacts, b.contacts))
     assert len(a.objects) == len(b.objects)
     for oa, ob in zip(a.objects, b.objects):
-        assert (oa.name, oa.geometry, oa.mass, oa.source) == (ob.name, ob.geometry, ob.mass, ob.source)
+        assert (oa.name, oa.geometry, oa.mass, oa.friction, oa.source) == (ob.name, ob.geometry, ob.mass, ob.friction, ob.source)
         np.testing.assert_allclose(oa.pose, ob.pose, **F32)
         assert (oa.contact is None) == (ob.contact is None) and (oa.contact is None or np.array_equal(oa.contact, ob.contact))
 

@@ -13,6 +13,10 @@ SMALL_BOX = Primitive("box", (0.20, 0.15, 0.15))  # 0.4 x 0.3 x 0.3 m, long axis
 LARGE_BOX = Primitive("box", (0.30, 0.30, 0.60))  # 0.6 x 0.6 x 1.2 m cabinet-like box
 CHAIR = Chair()  # seat top 0.45 m
 SMALL_BOX_MASS, LARGE_BOX_MASS, CHAIR_MASS = 3.0, 20.0, 6.0
+# The pushed box stands on furniture sliders: pushed at 1.10 m it slides at mu m g = 29 N; it tips about
+# its far bottom edge at m g (0.30 m) / (1.10 m) = 54 N (with the default friction 0.8 it would tip long
+# before sliding at 157 N, which makes the demonstration physically impossible).
+LARGE_BOX_FRICTION = 0.15
 OBJECT_NAME = "object"  # one name in every clip: a dataset has one feature spec (geometry is per clip)
 
 # Lifting from the floor: the box centre this far ahead of the ankles' midpoint; squat posture.
@@ -170,5 +174,5 @@ def push(rng, fps: float):
     hw = body.ch["hw"]
     target = grip_points(pose, LARGE_GRIP) + _approach([[-1.0, 0.0, 0.0]] * 2, hw, out=0.08, up=0.0)
     touch = hw >= 1.0
-    obj = dict(name=OBJECT_NAME, geometry=LARGE_BOX, pose=pose, contact=touch, mass=LARGE_BOX_MASS)
+    obj = dict(name=OBJECT_NAME, geometry=LARGE_BOX, pose=pose, contact=touch, mass=LARGE_BOX_MASS, friction=LARGE_BOX_FRICTION)
     return make_demo("Push", fps, body, target, [obj], phases, {"left_wrist": touch, "right_wrist": touch})
