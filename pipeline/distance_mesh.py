@@ -46,7 +46,7 @@ _MAX_DIST = 1.0e6
 def _warp():
     import warp as wp
 
-    wp.config.quiet = True
+    wp.config.log_level = wp.LOG_WARNING  # no greeting or per-module load lines on stdout
     wp.init()
     return wp
 

@@ -20,8 +20,10 @@ the inside/outside sign wherever phi exceeds ``tol_near``. Otherwise it splits i
 outside the root grid or with interpolated phi below ``tol_near`` (its sign, so its grad, is not
 certain). The check is at points, not a proof: the bench measures the error on fresh points.
 
-Grad is not a refinement criterion: it jumps across medial surfaces (inside thin parts, in
-concave corners), which no finite cell resolves; near them it is a blend of the two sides.
+Grad is not a refinement criterion by default: it jumps across medial surfaces (inside thin
+parts, in concave corners), which no finite cell resolves; near them it is a blend of the two
+sides. ``tol_grad`` adds one outside the solid: on the 50k-face table, 0.2 took the outside grad
+error p99 from 0.42 to 0.05 (bounds + 1 m) at 6x the build time (238 s) and 4.5x the size (321 MB).
 The query runs in a warp kernel (:mod:`pipeline.distance_mesh`).
 """
 
@@ -46,13 +48,14 @@ class OctreeSpec:
 
     margin: float = 1.0  # sampled region: mesh bounds plus this on every side
     root: float = 0.16  # root cell size
-    depth: int = 7  # levels of splitting: finest cell root / 2**depth
+    depth: int = 6  # levels of splitting: finest cell root / 2**depth (2.5 mm)
     band: float = 0.1  # cells within this of the surface must meet tol_near
     tol_near: float = 5e-4
     tol_far: float = 5e-3
+    tol_grad: float | None = None  # outside the solid, |grad~ - grad| at the check points
 
     def key(self) -> str:
-        return "v2-" + "-".join(f"{k}{v:g}" for k, v in asdict(self).items())
+        return "v2-" + "-".join(f"{k}{v:g}" for k, v in asdict(self).items() if v is not None)
 
 
 def _trilinear(f: np.ndarray) -> np.ndarray:
@@ -103,9 +106,14 @@ class CachedField:
                 cid, org, cor = ids[k : k + _BUILD_CHUNK], origins[k : k + _BUILD_CHUNK], corners[k : k + _BUILD_CHUNK]
                 sample, phi = _samples(exact, (org[:, None, :] + _CHECKS[None] * h).reshape(-1, 3))
                 sample, phi = sample.reshape(len(cid), -1, 4), phi.reshape(len(cid), -1)
-                sd_i = np.einsum("kc,nc->nk", weights, cor[:, :, 0])
+                guess = np.einsum("kc,ncd->nkd", weights, cor)
+                sd_i = guess[:, :, 0]
                 err_phi = np.abs(np.abs(sd_i) - phi).max(1)
                 flips = ((sd_i < 0) != (sample[:, :, 0] < 0)) & (phi > spec.tol_near)
+                if spec.tol_grad is not None:  # grad~ = sign(sd~) u~/|u~| against sign(sd) u/|u|, outside only
+                    gi = guess[:, :, 1:] * (np.sign(sd_i) / np.maximum(np.linalg.norm(guess[:, :, 1:], axis=-1), 1e-300))[..., None]
+                    ge = sample[:, :, 1:] / np.maximum(phi, 1e-12)[..., None]
+                    flips |= (np.linalg.norm(gi - ge, axis=-1) > spec.tol_grad) & (sample[:, :, 0] > spec.tol_near)
                 near = np.minimum(phi.min(1), np.abs(cor[:, :, 0]).min(1)) - h * np.sqrt(3) / 2 <= spec.band
                 ok = (err_phi <= np.where(near, spec.tol_near, spec.tol_far)) & ~flips.any(1)
                 acc = np.flatnonzero(ok)
