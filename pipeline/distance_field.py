@@ -84,8 +84,9 @@ class ObjectField:
     name: str = "object"
 
     @classmethod
-    def from_geometry(cls, geom: ObjectGeometry | dict, name: str = "object") -> "ObjectField":
-        """Field of a Primitive or Chair (or its :func:`geometry_to_dict` form); meshes are not built yet."""
+    def from_geometry(cls, geom: ObjectGeometry | dict, name: str = "object", **mesh_options) -> "ObjectField":
+        """Field of a Primitive, Chair or MeshGeometry (or its :func:`geometry_to_dict` form).
+        ``mesh_options`` go to :class:`pipeline.distance_mesh.MeshShape` (e.g. ``cache=False``)."""
         if isinstance(geom, dict):
             try:
                 geom = geometry_from_dict(geom)
@@ -95,8 +96,10 @@ class ObjectField:
             return cls(primitive_shape(geom), name)
         if isinstance(geom, Chair):
             return cls(chair_shape(geom), name)
-        if isinstance(geom, MeshGeometry):  # exact mesh queries are being built (issue 5); until then a clear error
-            raise NotImplementedError(f"{name}: distance fields of mesh objects ({geom.path}) are not available yet")
+        if isinstance(geom, MeshGeometry):
+            from pipeline.distance_mesh import MeshShape
+
+            return cls(MeshShape.from_geometry(geom, **mesh_options), name)
         raise InputError(None, f"{name} geometry", f"expected Primitive, Chair or MeshGeometry, got {type(geom).__name__}")
 
     def query(self, points, pose) -> FieldSample:

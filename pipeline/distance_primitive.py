@@ -70,6 +70,36 @@ class _Section:
         return qx, qy, nx, ny, e.inside([x, y])
 
 
+def _box(x, y, z, hx, hy, hz, xp):
+    """Box field; half-extents are floats or per-point arrays."""
+    cx, cy, cz = xp.clip(x, -hx, hx), xp.clip(y, -hy, hy), xp.clip(z, -hz, hz)
+    dx, dy, dz = x - cx, y - cy, z - cz
+    out = _norm3(dx, dy, dz, xp)
+    solid = out <= EPS
+    qx, qy, qz = abs(x) - hx, abs(y) - hy, abs(z) - hz
+    ax = (qx >= qy) & (qx >= qz)
+    ay = ~ax & (qy >= qz)
+    az = ~ax & ~ay
+    inv = 1.0 / xp.where(solid, 1.0, out)
+    sx, sy, sz = _sign(x), _sign(y), _sign(z)
+    g = (
+        xp.where(solid, ax * sx, dx * inv),
+        xp.where(solid, ay * sy, dy * inv),
+        xp.where(solid, az * sz, dz * inv),
+    )
+    c = (xp.where(solid & ax, sx * hx, cx), xp.where(solid & ay, sy * hy, cy), xp.where(solid & az, sz * hz, cz))
+    depth = abs(xp.maximum(xp.maximum(qx, qy), qz))
+    return xp.where(solid, depth, out), g, c
+
+
+def _box_phi(x, y, z, hx, hy, hz, xp):
+    """phi only: |outside distance| or inside depth."""
+    qx, qy, qz = abs(x) - hx, abs(y) - hy, abs(z) - hz
+    ox, oy, oz = xp.clip(qx, 0.0, None), xp.clip(qy, 0.0, None), xp.clip(qz, 0.0, None)
+    out = _norm3(ox, oy, oz, xp)
+    return xp.where(out > 0, out, -xp.maximum(xp.maximum(qx, qy), qz))
+
+
 @dataclass(frozen=True)
 class BoxShape:
     """Box with half-extents ``half`` (scale applied)."""
@@ -77,25 +107,7 @@ class BoxShape:
     half: tuple[float, float, float]
 
     def local(self, x, y, z, xp):
-        hx, hy, hz = self.half
-        cx, cy, cz = xp.clip(x, -hx, hx), xp.clip(y, -hy, hy), xp.clip(z, -hz, hz)
-        dx, dy, dz = x - cx, y - cy, z - cz
-        out = _norm3(dx, dy, dz, xp)
-        solid = out <= EPS
-        qx, qy, qz = abs(x) - hx, abs(y) - hy, abs(z) - hz
-        ax = (qx >= qy) & (qx >= qz)
-        ay = ~ax & (qy >= qz)
-        az = ~ax & ~ay
-        inv = 1.0 / xp.where(solid, 1.0, out)
-        sx, sy, sz = _sign(x), _sign(y), _sign(z)
-        g = (
-            xp.where(solid, ax * sx, dx * inv),
-            xp.where(solid, ay * sy, dy * inv),
-            xp.where(solid, az * sz, dz * inv),
-        )
-        c = (xp.where(solid & ax, sx * hx, cx), xp.where(solid & ay, sy * hy, cy), xp.where(solid & az, sz * hz, cz))
-        depth = abs(xp.maximum(xp.maximum(qx, qy), qz))
-        return xp.where(solid, depth, out), g, c
+        return _box(x, y, z, *self.half, xp)
 
 
 @dataclass(frozen=True)
@@ -222,25 +234,26 @@ class CapsuleShape:
 
 @dataclass(frozen=True)
 class ChairShape:
-    """Union of boxes (the chair's parts); each point takes its nearest part."""
+    """Union of boxes (the chair's parts); each point takes its nearest part (the first on ties).
+    phi of every part first, then the full field of the nearest one only."""
 
     parts: tuple[tuple[BoxShape, tuple[float, float, float]], ...]
 
     def local(self, x, y, z, xp):
-        best = None
-        for box, (ox, oy, oz) in self.parts:
-            phi, g, c = box.local(x - ox, y - oy, z - oz, xp)
-            c = (c[0] + ox, c[1] + oy, c[2] + oz)
+        best = part = None
+        for k, (box, (ox, oy, oz)) in enumerate(self.parts):
+            phi = _box_phi(x - ox, y - oy, z - oz, *box.half, xp)
             if best is None:
-                best = (phi, g, c)
+                best, part = phi, 0 * (phi > 0)
                 continue
-            near = phi < best[0]
-            best = (
-                xp.where(near, phi, best[0]),
-                tuple(xp.where(near, a, b) for a, b in zip(g, best[1])),
-                tuple(xp.where(near, a, b) for a, b in zip(c, best[2])),
-            )
-        return best
+            near = phi < best
+            best, part = xp.where(near, phi, best), xp.where(near, k, part)
+        table = np.array([[*box.half, *o] for box, o in self.parts])
+        if not isinstance(x, np.ndarray):
+            table = xp.as_tensor(table, dtype=x.dtype, device=x.device)
+        hx, hy, hz, ox, oy, oz = (table[part, i] for i in range(6))
+        phi, g, c = _box(x - ox, y - oy, z - oz, hx, hy, hz, xp)
+        return phi, g, (c[0] + ox, c[1] + oy, c[2] + oz)
 
 
 def primitive_shape(p: Primitive):

@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.distance_field import ObjectField, ObjectFields
 from pipeline.errors import InputError
-from pipeline.geometry import Chair, MeshGeometry, Primitive, geometry_to_dict
+from pipeline.geometry import Chair, Primitive, geometry_to_dict
 
 RNG = np.random.default_rng(11)
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
@@ -145,8 +145,3 @@ def test_zero_scale_is_rejected_naming_the_object():
     d["scale"] = [1.0, 0.0, 1.0]
     with pytest.raises(InputError, match=r"^<memory>: crate geometry: scale must be three positive"):
         ObjectField.from_geometry(d, name="crate")
-
-
-def test_mesh_objects_say_they_are_not_built_yet():
-    with pytest.raises(NotImplementedError, match=r"table: distance fields of mesh objects \(table\.obj\) are not available yet"):
-        ObjectField.from_geometry(MeshGeometry("table.obj"), "table")
