@@ -183,15 +183,21 @@ def test_without_hand_contacts_nothing_is_held_and_the_hands_are_kept_off(scene)
     assert not grasp_schedule(scene, ref, LINKS, one, {"box": box}, cfg).grasped.any()
 
 
-def _lift(scene, cfg: GraspConfig | None = GraspConfig()):
-    qpos, box, contacts = _lift_clip(scene)
+def _track_box(scene, qpos, box, contacts, cfg: GraspConfig | None = GraspConfig()):
+    """(rollout, simulated box poses, grasp schedule) of tracking ``qpos`` with the box ``box``; ``cfg`` None: no grasp."""
     ref = build_reference(scene.model, qpos, 50)
     if cfg is not None:
         ref.grasp = grasp_schedule(scene, ref, LINKS, contacts, {"box": box}, cfg)
     q0, v0 = initial_state(scene, ref, {"box": box})
     roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile), q0, v0, contact_links=LINKS)
     adr = scene.object_qpos_adr["box"]
-    return roll, box, roll.qpos[:, adr : adr + 7]
+    return roll, roll.qpos[:, adr : adr + 7], ref.grasp
+
+
+def _lift(scene, cfg: GraspConfig | None = GraspConfig()):
+    qpos, box, contacts = _lift_clip(scene)
+    roll, sim, _ = _track_box(scene, qpos, box, contacts, cfg)
+    return roll, box, sim
 
 
 @pytest.mark.parametrize("mass", [1.0, 2.0])

@@ -15,12 +15,11 @@ The G1 stands in double support next to a free box resting on a fixed pedestal:
 import mujoco
 import numpy as np
 import pytest
-from test_grasp import _arm_ik, _smooth
+from test_grasp import _arm_ik, _smooth, _track_box
 
 from physicalize.grasp import GraspConfig, grasp_schedule, hand_offsets
 from physicalize.reference import build_reference, place_on_floor
-from physicalize.rollout import initial_state, simulate
-from physicalize.wbc import HAND_BODIES, WholeBodyController
+from physicalize.wbc import HAND_BODIES
 from pipeline.geometry import ObjectPhysics, Primitive
 from pipeline.robot import default_qpos
 from pipeline.scene import SceneObject, build_scene
@@ -45,16 +44,6 @@ def scene():
     return _scene()
 
 
-def _run(scene, qpos, box, contacts, cfg: GraspConfig | None = GraspConfig()):
-    ref = build_reference(scene.model, qpos, 50)
-    if cfg is not None:
-        ref.grasp = grasp_schedule(scene, ref, LINKS, contacts, {"box": box}, cfg)
-    q0, v0 = initial_state(scene, ref, {"box": box})
-    roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile), q0, v0, contact_links=LINKS)
-    adr = scene.object_qpos_adr["box"]
-    return roll, roll.qpos[:, adr : adr + 7], ref.grasp
-
-
 def _brush_clip(scene):
     """The left hand from 6 cm beside the box's +y side to 1 cm into it (frames 10-60), held; the right hand away."""
     m = scene.model
@@ -72,11 +61,11 @@ def _brush_clip(scene):
 def test_an_unlabelled_hand_is_kept_off_the_box(scene):
     qpos, box, contacts = _brush_clip(scene)
     cfg = GraspConfig()
-    roll, sim, g = _run(scene, qpos, box, contacts, cfg)
+    roll, sim, g = _track_box(scene, qpos, box, contacts, cfg)
     assert roll.fell_at is None and not g.grasped.any() and g.clear[70:, 0].all()
     assert np.abs(sim[:, :3] - POS).max() < 0.005  # the box stays where it rests
     assert not roll.contact[:, 1].any()  # the left hand never touches it
-    roll0, sim0, _ = _run(scene, qpos, box, contacts, None)
+    roll0, sim0, _ = _track_box(scene, qpos, box, contacts, None)
     assert roll0.fell_at is None and np.abs(sim0[-1, 1] - POS[1]) > 0.01  # tracked as is, the hand shoves the box
 
 
@@ -110,11 +99,11 @@ def test_two_hands_push_a_box_along_its_support(scene):
     assert v > GraspConfig().slide_speed
     a = (box[t + 1, 0] - 2 * box[t, 0] + box[t - 1, 0]) * 2500
     assert g.force[t, :, 0].sum() == pytest.approx(MU * 1.0 * 9.81 + 1.0 * a, rel=0.02)
-    roll, sim, _ = _run(scene, qpos, box, contacts)
+    roll, sim, _ = _track_box(scene, qpos, box, contacts)
     assert roll.fell_at is None and roll.external_force.max() == 0.0
     assert sim[-1, 0] - POS[0] > PUSH - 0.03  # pushed along
     assert np.linalg.norm(sim[:, :3] - box[:, :3], axis=1).max() < 0.04
-    roll0, sim0, _ = _run(scene, qpos, box, contacts, None)
+    roll0, sim0, _ = _track_box(scene, qpos, box, contacts, None)
     assert sim0[-1, 0] - POS[0] < 0.5 * PUSH  # without the schedule the hands, 1 cm behind it, leave it behind
 
 
