@@ -32,7 +32,7 @@ retarget: install
 
 TEACHER ?= base
 physicalize: install
-	$(CLI) physicalize $(STAGE_ARGS) --teacher $(TEACHER)
+	$(CLI) physicalize $(STAGE_ARGS) --teacher $(TEACHER) $(if $(KEEP_INVALID),--keep-invalid)
 
 # Smoke scale (CPU, ~1-2 min): a residual on one retargeted clip; then `make physicalize TEACHER=base+residual:$(CKPT)`.
 EPISODE ?= 0
@@ -44,7 +44,7 @@ train-residual: install
 	$(CLI) physicalize-residual --name $(NAME) --episode $(EPISODE) --iterations $(ITERATIONS) --envs $(ENVS) --seed $(SEED) --out $(CKPT)
 
 features: install
-	$(CLI) features $(STAGE_ARGS)
+	$(CLI) features --name $(NAME) $(if $(OVERWRITE),--overwrite)
 
 test: install
 	$(PY) -m pytest -n 2 --dist loadfile -q tests

@@ -25,7 +25,7 @@ import numpy as np
 from tqdm import tqdm
 
 from physicalize.rollout import Rollout
-from pipeline.clip import RobotClip
+from pipeline.clip import PhysicalizedClip, RobotClip
 from pipeline.errors import InputError
 
 TEACHERS = ("base", "base+residual:<checkpoint>")
@@ -232,38 +232,16 @@ CARD_NOTES = [
 ]
 
 
-def _episodes(results: list[ClipResult]):
-    from pipeline.clip_dataset import robot_clips_to_episodes
-    from pipeline.dataset import Feature
-    from pipeline.robot import G1_JOINT_NAMES, QPOS_NAMES
-
-    features, episodes = robot_clips_to_episodes([r.robot for r in results])
-    for f in features:
-        if f.name == "observation.qvel":
-            object.__setattr__(f, "description", "G1 qvel from the simulation: root linear velocity (world), root angular velocity (body), joint velocities")
-    features += [
-        Feature("action", "float32", G1_JOINT_NAMES, "joint position targets held for the next 20 ms", "rad"),
-        Feature("observation.torque", "float32", G1_JOINT_NAMES, "applied actuator torques (mean over the hold)", "N m"),
-        Feature("observation.foot_force", "float32", ("left", "right"), "vertical floor contact force on each foot", "N"),
-        Feature("reference.state", "float32", QPOS_NAMES, "retargeted qpos tracked at this frame", "m, rad"),
-    ]  # fmt: skip
-    names = [o.name for o in results[0].robot.objects]
-    features += [Feature(f"object.{n}.vel", "float32", ("vx", "vy", "vz", "wx", "wy", "wz"), f"object {n!r} velocity (linear world, angular body)", "m/s, rad/s") for n in names]
-    for ep, r in zip(episodes, results):
-        roll, T = r.rollout, r.robot.frames
-        ep.data["observation.qvel"] = roll.qvel[:, :35]
-        ep.data.update({"action": roll.action, "observation.torque": roll.torque, "observation.foot_force": roll.foot_force,
-                        "reference.state": r.com["reference_qpos"][:T]})  # fmt: skip
-        for n in names:
-            adr = 35 + 6 * names.index(n)
-            ep.data[f"object.{n}.vel"] = roll.qvel[:, adr : adr + 6]
-        ep.meta.update({"kind": "robot", "stage": "physicalized", "validation": r.figures})
-    return features, episodes
+def _physicalized(r: ClipResult) -> PhysicalizedClip:
+    """The clip as the dataset stores it: the simulated motion and what the simulation measured."""
+    roll, T = r.rollout, r.robot.frames
+    vel = tuple(roll.qvel[:, 35 + 6 * k : 41 + 6 * k] for k in range(len(r.robot.objects)))
+    return PhysicalizedClip(r.robot, roll.qvel[:, :35], vel, roll.action, roll.torque, roll.foot_force, r.com["reference_qpos"][:T], r.figures)
 
 
 def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", profile: str = "mjlab", keep_invalid: bool = False) -> dict:
     """``lessmimic physicalize``: simulate every retargeted clip, write the dataset, report and logs."""
-    from pipeline.clip_dataset import episodes_to_robot_clips
+    from pipeline.clip_dataset import episodes_to_robot_clips, physicalized_clips_to_episodes
     from pipeline.dataset import write_dataset
     from pipeline.dataset_card import DatasetCard
     from pipeline.dataset_write import check_target
@@ -314,7 +292,7 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
             print(f"invalid: {c['source']}: {c['reason']}")
     if kept:
         fps = int(round(clips[0].fps))
-        features, episodes = _episodes(kept)
+        features, episodes = physicalized_clips_to_episodes([_physicalized(r) for r in kept])
         teacher_note = f"Teacher: `{teacher}`" + (f" (checkpoint sha256 {spec.digest}): the base QP controller's joint targets plus a learned "
                                                    "residual (PPO, physicalize.residual), used deterministically (mean action)." if spec.digest else ".")
         synthetic = any(r.robot.provenance.get("synthetic") for r in kept)

@@ -15,11 +15,6 @@ from pathlib import Path
 
 from pipeline.errors import InputError
 
-_NOT_YET = {
-    "features": 5,
-}
-
-
 def _stage_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--input", default=None, help="mocap file or folder (BVH, OMOMO .pt, AMASS .npz, C3D, MCAP, keypoints .npz/.csv); default: embedded synthetic demos")
     p.add_argument("--name", default="default", help="dataset name: outputs go to datasets/<NAME>/<stage>/ (default: default)")
@@ -72,13 +67,14 @@ def _cmd_physicalize_residual(a: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_later_stage(a: argparse.Namespace) -> int:
-    from pipeline.ingest import stage_dir
+def _cmd_features(a: argparse.Namespace) -> int:
+    from features.compute import FeatureConfig
+    from features.stage import run_stage
 
-    prev = {"features": "physicalized"}[a.command]
-    src = stage_dir(a.name, prev)
-    state = "found" if (src / "meta" / "info.json").is_file() else "not found"
-    print(f"{a.command}: not built yet (issue #{_NOT_YET[a.command]}); its input {src} {state}; nothing written")
+    cfg = FeatureConfig(**({"links": tuple(a.links.split(","))} if a.links else {}))
+    report = run_stage(a.name, overwrite=a.overwrite, config=cfg)
+    s = report["summary"]
+    print(f"features of {s['clips']} clip(s), {s['frames']} frames ({s['frames_per_cpu_s']:.0f} frames per CPU-second) -> datasets/{a.name}/features/")
     return 0
 
 
@@ -162,9 +158,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--profile", default="mjlab", help="actuator profile (default mjlab)")
     p.add_argument("--out", required=True, help="checkpoint path (.pt)")
     p.set_defaults(func=_cmd_physicalize_residual)
-    p = sub.add_parser("features", help="physicalized data -> distance-field features")
-    _stage_args(p)
-    p.set_defaults(func=_cmd_later_stage)
+    p = sub.add_parser("features", help="physicalized data -> distance-field interaction features (datasets/<NAME>/features/)")
+    p.add_argument("--name", default="default", help="dataset name: reads datasets/<NAME>/physicalized/, writes datasets/<NAME>/features/")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output dataset")
+    p.add_argument("--links", default=None, help="comma-separated G1 body names for observation.df (default: pelvis, torso, hips, knees, "
+                   "ankles, shoulders, elbows, wrists)")
+    p.set_defaults(func=_cmd_features)
     p = sub.add_parser("inspect", help="write an MCAP inspection log (Foxglove) for a clip file")
     p.add_argument("file")
     p.add_argument("--out", required=True, help="output .mcap path")

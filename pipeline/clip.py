@@ -1,4 +1,5 @@
-"""The typed clip schema every stage exchanges: :class:`HumanClip`, :class:`ObjectTrack`, :class:`RobotClip`.
+"""The typed clip schema every stage exchanges: :class:`HumanClip`, :class:`ObjectTrack`, :class:`RobotClip`,
+:class:`PhysicalizedClip`.
 
 Conventions (all clips, all stages):
 
@@ -23,6 +24,8 @@ from pipeline.geometry import ObjectGeometry, ObjectPhysics
 from pipeline.rotations import slerp_wxyz
 
 QPOS_DIM = 36
+QVEL_DIM = 35
+NUM_JOINTS = 29
 
 
 def _check_fps(fps: float, source: str) -> float:
@@ -257,3 +260,44 @@ class RobotClip:
         contacts = None if self.contacts is None else _nearest(t, self.contacts, nt)
         objects = tuple(o.resampled(self.fps, new_fps) for o in self.objects)
         return replace(self, qpos=qpos, contacts=contacts, objects=objects, fps=new_fps)
+
+
+@dataclass(frozen=True)
+class PhysicalizedClip:
+    """A G1 clip simulated in MuJoCo (the physicalize stage's output, the features stage's input).
+
+    ``robot`` holds the simulated motion: ``qpos`` and the objects' simulated poses, with the
+    per-link robot-object contact flags measured in the simulation. Per frame ``t`` (50 Hz) also:
+
+    * ``qvel (T, 35)`` -- the robot's MuJoCo ``qvel``: root linear velocity (world), root angular
+      velocity (root body frame), joint velocities;
+    * ``object_vel`` -- per object ``(T, 6)``: linear velocity of its origin (world), angular
+      velocity (object body frame), MuJoCo free-joint convention;
+    * ``action (T, 29)`` -- joint position targets held from ``t`` to ``t + 1``;
+    * ``torque (T, 29)`` -- applied actuator torques, mean over the hold;
+    * ``foot_force (T, 2)`` -- vertical floor force on the left and right foot [N];
+    * ``reference_qpos (T, 36)`` -- the retargeted ``qpos`` tracked at ``t``;
+    * ``validation`` -- the clip's validation figures (``valid``, ``reason``, errors).
+    """
+
+    robot: RobotClip
+    qvel: np.ndarray
+    object_vel: tuple[np.ndarray, ...]
+    action: np.ndarray
+    torque: np.ndarray
+    foot_force: np.ndarray
+    reference_qpos: np.ndarray
+    validation: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        src, T = self.robot.source, self.robot.frames
+        for name, dim in (("qvel", QVEL_DIM), ("action", NUM_JOINTS), ("torque", NUM_JOINTS), ("foot_force", 2), ("reference_qpos", QPOS_DIM)):
+            object.__setattr__(self, name, check_array(getattr(self, name), (None, dim), name, src, frames=T))
+        vel = tuple(self.object_vel)
+        if len(vel) != len(self.robot.objects):
+            raise InputError(src, "object_vel", f"{len(vel)} velocity tracks for {len(self.robot.objects)} objects")
+        object.__setattr__(self, "object_vel", tuple(check_array(v, (None, 6), f"object {o.name} vel", src, frames=T) for v, o in zip(vel, self.robot.objects)))
+
+    @property
+    def frames(self) -> int:
+        return self.robot.frames

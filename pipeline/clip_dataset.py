@@ -13,6 +13,12 @@ Robot datasets (:func:`robot_clips_to_episodes`, :func:`episodes_to_robot_clips`
 * ``source_frame`` -- frame index in the source motion: ``t + provenance["source_frame_start"]``
   (0 when absent).
 
+Physicalized datasets (:func:`physicalized_clips_to_episodes`, :func:`episodes_to_physicalized_clips`):
+the robot features with ``observation.qvel`` from the simulation, plus ``action`` (29 joint position
+targets), ``observation.torque`` (29), ``observation.foot_force`` (left, right), ``reference.state``
+(the retargeted ``qpos`` tracked) and ``object.<name>.vel`` (linear world, angular body); the
+validation figures go into the episode metadata.
+
 Human datasets (:func:`human_clips_to_episodes`, :func:`episodes_to_human_clips`):
 ``observation.joint_pos`` (J*3, names ``<joint>.x``), ``observation.joint_quat`` (J*4, names
 ``<joint>.qw`` ..., when the clips have orientations), ``contact`` (J), the object features and
@@ -31,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.clip import HumanClip, ObjectTrack, RobotClip, Skeleton
+from pipeline.clip import HumanClip, ObjectTrack, PhysicalizedClip, RobotClip, Skeleton
 from pipeline.dataset import Episode, Feature
 from pipeline.errors import InputError
 from pipeline.geometry import geometry_from_dict, geometry_to_dict
@@ -188,22 +194,72 @@ def robot_clips_to_episodes(clips: Sequence[RobotClip], *, default_task: str = D
     return features, episodes
 
 
+def _robot_clip(ep: Episode, root, e: int, fps: float) -> RobotClip:
+    m = ep.meta
+    if m.get("kind") != "robot":
+        raise InputError(root, f"episode {e}", "was not written from a robot clip (sidecar meta kind is not 'robot')")
+    links = tuple(m.get("contact_links", ()))
+    contacts = ep.data["contact"].astype(bool) if links and m.get("has_contacts") else None
+    return RobotClip(
+        qpos=ep.data["observation.state"].astype(np.float64), fps=float(m.get("fps", fps)), source=m["source"],
+        objects=_objects_back(ep, m["source"]), contact_links=links, contacts=contacts, method=m.get("method", ""),
+        provenance=m.get("provenance", {}), task=m.get("clip_task", ep.task),
+    )  # fmt: skip
+
+
 def episodes_to_robot_clips(root: str | Path) -> list[RobotClip]:
     """Robot clips back from a dataset written from :func:`robot_clips_to_episodes`."""
     from pipeline.dataset_read import iter_episodes, read_info
 
     fps = read_info(root)["fps"]
+    return [_robot_clip(ep, root, e, fps) for e, ep in enumerate(iter_episodes(root))]
+
+
+# --- physicalized clips --------------------------------------------------------------------------
+
+_VEL_NAMES = ("vx", "vy", "vz", "wx", "wy", "wz")
+
+
+def physicalized_clips_to_episodes(clips: Sequence[PhysicalizedClip]) -> tuple[list[Feature], list[Episode]]:
+    """The feature spec and one episode per simulated clip (the robot features of :func:`robot_clips_to_episodes`
+    with ``observation.qvel`` from the simulation, plus the simulation's actions, torques, forces and object velocities)."""
+    features, episodes = robot_clips_to_episodes([c.robot for c in clips])
+    for f in features:
+        if f.name == "observation.qvel":
+            object.__setattr__(f, "description", "G1 qvel from the simulation: root linear velocity (world), root angular velocity (body), joint velocities")
+    features += [
+        Feature("action", "float32", G1_JOINT_NAMES, "joint position targets held for the next 20 ms", "rad"),
+        Feature("observation.torque", "float32", G1_JOINT_NAMES, "applied actuator torques (mean over the hold)", "N m"),
+        Feature("observation.foot_force", "float32", ("left", "right"), "vertical floor contact force on each foot", "N"),
+        Feature("reference.state", "float32", QPOS_NAMES, "retargeted qpos tracked at this frame", "m, rad"),
+    ]  # fmt: skip
+    names = [o.name for o in clips[0].robot.objects]
+    features += [Feature(f"object.{n}.vel", "float32", _VEL_NAMES, f"object {n!r} velocity (linear world, angular body)", "m/s, rad/s") for n in names]
+    for ep, c in zip(episodes, clips):
+        ep.data.update({"observation.qvel": c.qvel, "action": c.action, "observation.torque": c.torque, "observation.foot_force": c.foot_force,
+                        "reference.state": c.reference_qpos})  # fmt: skip
+        ep.data.update({f"object.{n}.vel": v for n, v in zip(names, c.object_vel)})
+        ep.meta.update({"stage": "physicalized", "validation": c.validation})
+    return features, episodes
+
+
+def episodes_to_physicalized_clips(root: str | Path) -> list[PhysicalizedClip]:
+    """Simulated clips back from a dataset written from :func:`physicalized_clips_to_episodes`; a
+    dataset without the simulation's columns (e.g. a retargeted one) is an :class:`InputError`."""
+    from pipeline.dataset_read import iter_episodes, read_info
+
+    info = read_info(root)
+    names = info["features"]
+    missing = [k for k in ("action", "observation.torque", "observation.foot_force", "reference.state") if k not in names]
+    if missing:
+        raise InputError(root, "features", f"missing {missing}: not a physicalized dataset (run `lessmimic physicalize` first)")
     clips = []
     for e, ep in enumerate(iter_episodes(root)):
-        m = ep.meta
-        if m.get("kind") != "robot":
-            raise InputError(root, f"episode {e}", "was not written from a robot clip (sidecar meta kind is not 'robot')")
-        links = tuple(m.get("contact_links", ()))
-        contacts = ep.data["contact"].astype(bool) if links and m.get("has_contacts") else None
-        clips.append(RobotClip(
-            qpos=ep.data["observation.state"].astype(np.float64), fps=float(m.get("fps", fps)), source=m["source"],
-            objects=_objects_back(ep, m["source"]), contact_links=links, contacts=contacts, method=m.get("method", ""),
-            provenance=m.get("provenance", {}), task=m.get("clip_task", ep.task),
+        robot, d = _robot_clip(ep, root, e, info["fps"]), ep.data
+        clips.append(PhysicalizedClip(
+            robot=robot, qvel=d["observation.qvel"], object_vel=tuple(d[f"object.{o.name}.vel"] for o in robot.objects),
+            action=d["action"], torque=d["observation.torque"], foot_force=d["observation.foot_force"],
+            reference_qpos=d["reference.state"], validation=ep.meta.get("validation", {}),
         ))  # fmt: skip
     return clips
 

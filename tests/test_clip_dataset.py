@@ -4,12 +4,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.clip import HumanClip, ObjectTrack, RobotClip, Skeleton
+from pipeline.clip import HumanClip, ObjectTrack, PhysicalizedClip, RobotClip, Skeleton
 from pipeline.clip_dataset import (
     clips_fps,
     episodes_to_human_clips,
+    episodes_to_physicalized_clips,
     episodes_to_robot_clips,
     human_clips_to_episodes,
+    physicalized_clips_to_episodes,
     qpos_difference,
     qvel_from_qpos,
     robot_clips_to_episodes,
@@ -125,6 +127,35 @@ def test_robot_round_trip_through_lerobot(tmp_path):
     assert len(back) == 3
     for a, b in zip(back, clips):
         _assert_robot_equal(a, b)
+
+
+def _physicalized(T, seed):
+    rng = np.random.default_rng(seed)
+    robot = _robot_clip(T, seed)
+    return PhysicalizedClip(robot, rng.normal(size=(T, 35)), (rng.normal(size=(T, 6)), np.zeros((T, 6))), rng.normal(size=(T, 29)),
+                            rng.normal(size=(T, 29)), rng.random((T, 2)) * 300, _qpos(T, seed + 10), {"valid": seed == 1, "reason": "" if seed == 1 else "fell at t=0.10 s"})  # fmt: skip
+
+
+def test_physicalized_round_trip_through_lerobot(tmp_path):
+    clips = [_physicalized(8, 1), _physicalized(5, 2)]
+    features, episodes = physicalized_clips_to_episodes(clips)
+    root = write_dataset(tmp_path / "sim", "tester/sim", 50, features, episodes)
+    ds = LeRobotDataset("tester/sim", root=root)
+    assert ds.num_frames == 13 and tuple(ds.features["object.box.vel"]["shape"]) == (6,)
+    np.testing.assert_allclose(ds[8]["action"].numpy(), clips[1].action[0], **F32)
+    back = episodes_to_physicalized_clips(root)
+    for a, b in zip(back, clips):
+        _assert_robot_equal(a.robot, b.robot)
+        for k in ("qvel", "action", "torque", "foot_force", "reference_qpos"):
+            np.testing.assert_allclose(getattr(a, k), getattr(b, k), rtol=1e-6, atol=1e-4)
+        for va, vb in zip(a.object_vel, b.object_vel):
+            np.testing.assert_allclose(va, vb, **F32)
+        assert a.validation == b.validation
+    with pytest.raises(InputError, match="not a physicalized dataset"):
+        robot_features, robot_episodes = robot_clips_to_episodes([c.robot for c in clips])
+        episodes_to_physicalized_clips(write_dataset(tmp_path / "robot", "tester/robot", 50, robot_features, robot_episodes))
+    with pytest.raises(InputError, match="action.*frames"):
+        PhysicalizedClip(clips[0].robot, clips[0].qvel, clips[0].object_vel, clips[0].action[:3], clips[0].torque, clips[0].foot_force, clips[0].reference_qpos)
 
 
 def test_human_round_trip_through_lerobot(tmp_path):

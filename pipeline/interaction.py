@@ -1,0 +1,74 @@
+"""The paper's per-link interaction feature u_t (Sec. III-A) and the released demo's layout.
+
+For a link at ``x`` with linear velocity ``v`` and the distance field of the nearest object,
+
+    phi = phi(x),   g = grad phi(x),
+    v_norm = (v . g) g,   v_tan = v - v_norm,   u = [phi, g, v_norm, v_tan]   (10 per link),
+
+all in the world frame as the paper writes it (:func:`interaction_features`). The *relative*
+variant uses ``v - v_c`` instead of ``v``, with ``v_c`` the velocity of the object's closest
+surface point (:func:`surface_point_velocity`), which is what matters when the object moves with
+the hands (Carry). The interaction window ``I_t = {u_(t-l+1) .. u_t}`` is served by the loaders
+(LeRobot ``delta_timestamps``, :class:`pipeline.dataset_read.WindowDataset`); datasets store u_t.
+
+The demo layout (:func:`demo_features`, the LessMimic web demo's input contract): per query body,
+``min(phi, max_distance)`` and the gradient in the body's own frame, ``R_body^T g`` (4 per body).
+
+Everything takes numpy arrays or torch tensors alike (RL environments compute the same online).
+"""
+
+from __future__ import annotations
+
+from pipeline.array_ns import namespace
+
+DF_PARTS = ("phi", "grad_x", "grad_y", "grad_z", "v_norm_x", "v_norm_y", "v_norm_z", "v_tan_x", "v_tan_y", "v_tan_z")
+DEMO_PARTS = ("phi", "grad_x", "grad_y", "grad_z")
+DEMO_MAX_DISTANCE_M = 1.0
+
+
+def _cat(arrays, xp):
+    return xp.concatenate(arrays, -1) if xp.__name__ == "numpy" else xp.cat(arrays, -1)
+
+
+def interaction_features(phi, grad, vel):
+    """``u = [phi, g, v_norm, v_tan]`` (..., 10) from ``phi (...)``, unit ``grad (..., 3)``, ``vel (..., 3)``."""
+    xp = namespace(phi)
+    v_norm = (vel * grad).sum(-1)[..., None] * grad
+    return _cat([phi[..., None], grad, v_norm, vel - v_norm], xp)
+
+
+def surface_point_velocity(closest, object_index, poses, object_vel):
+    """Velocity of the nearest object's surface point ``c``: ``v_o + (R_o w_o) x (c - p_o)``.
+
+    ``closest (T, K, 3)`` world points, ``object_index (T, K)`` into the ``M`` objects, ``poses (T, M, 7)``
+    (x, y, z, qw, qx, qy, qz), ``object_vel (T, M, 6)`` in MuJoCo's free-joint convention: linear velocity
+    of the origin (world), angular velocity (object frame)."""
+    xp = namespace(closest)
+    rows = xp.arange(closest.shape[0])[:, None] + 0 * object_index
+    pose, vel = poses[rows, object_index], object_vel[rows, object_index]  # (T, K, 7), (T, K, 6)
+    w, x, y, z = (pose[..., i] for i in range(3, 7))
+    n = xp.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    wb = vel[..., 3:]
+    # R w_body with R from the unit quaternion (w, x, y, z)
+    ww = xp.stack([
+        (1 - 2 * (y * y + z * z)) * wb[..., 0] + 2 * (x * y - w * z) * wb[..., 1] + 2 * (x * z + w * y) * wb[..., 2],
+        2 * (x * y + w * z) * wb[..., 0] + (1 - 2 * (x * x + z * z)) * wb[..., 1] + 2 * (y * z - w * x) * wb[..., 2],
+        2 * (x * z - w * y) * wb[..., 0] + 2 * (y * z + w * x) * wb[..., 1] + (1 - 2 * (x * x + y * y)) * wb[..., 2],
+    ], -1)  # fmt: skip
+    r = closest - pose[..., :3]
+    cross = xp.stack([ww[..., 1] * r[..., 2] - ww[..., 2] * r[..., 1], ww[..., 2] * r[..., 0] - ww[..., 0] * r[..., 2],
+                      ww[..., 0] * r[..., 1] - ww[..., 1] * r[..., 0]], -1)  # fmt: skip
+    return vel[..., :3] + cross
+
+
+def demo_features(phi, grad, link_rot, max_distance: float = DEMO_MAX_DISTANCE_M):
+    """The demo's per-body ``[min(phi, max_distance), R^T g]`` (..., 4); ``link_rot (..., 3, 3)`` body-to-world."""
+    xp = namespace(phi)
+    local = xp.einsum("...ji,...j->...i", link_rot, grad)
+    return _cat([xp.clip(phi, None, max_distance)[..., None], local], xp)
+
+
+def feature_names(links, parts=DF_PARTS) -> tuple[str, ...]:
+    """Flat per-link names, ``<link>.<part>``, in the order the features are stored."""
+    return tuple(f"{link}.{p}" for link in links for p in parts)

@@ -1,0 +1,71 @@
+"""World positions, orientations and linear velocities of G1 links along a trajectory, from MuJoCo.
+
+For each frame the robot's ``(qpos, qvel)`` goes into a robot-only MuJoCo model (the G1 of
+:func:`pipeline.robot.g1_xml_path`), forward kinematics places the bodies, and
+``mj_objectVelocity`` gives each body's 6-D velocity at its origin in world orientation; the
+linear part is the link velocity ``v = J_p(q) qd`` of the paper's DF features, exact for the
+simulated state (no finite differences).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import mujoco
+import numpy as np
+
+from pipeline.errors import InputError
+
+
+@dataclass(frozen=True)
+class LinkMotion:
+    """``pos (T, K, 3)`` world [m], ``rot (T, K, 3, 3)`` body-to-world rotation, ``vel (T, K, 3)`` world
+    linear velocity of the body origin [m/s], for the links ``names``."""
+
+    names: tuple[str, ...]
+    pos: np.ndarray
+    rot: np.ndarray
+    vel: np.ndarray
+
+
+@lru_cache(maxsize=1)
+def _robot_model() -> mujoco.MjModel:
+    from pipeline.robot import g1_xml_path
+
+    return mujoco.MjModel.from_xml_path(str(g1_xml_path()))
+
+
+def body_ids(model: mujoco.MjModel, links: tuple[str, ...] | list[str], source: str | None = None) -> list[int]:
+    """MuJoCo body ids of ``links``; a name not on the robot is a one-line :class:`InputError`."""
+    ids = []
+    for name in links:
+        i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if i < 0:
+            raise InputError(source, "links", f"link {name!r} is not a body of the G1 model (e.g. pelvis, torso_link, left_wrist_yaw_link)")
+        ids.append(i)
+    return ids
+
+
+def link_motion(qpos: np.ndarray, qvel: np.ndarray, links: tuple[str, ...], source: str | None = None) -> LinkMotion:
+    """Link poses and velocities for G1 ``qpos (T, 36)`` and MuJoCo ``qvel (T, 35)`` (root linear velocity
+    in the world, root angular velocity in the root frame, joint velocities)."""
+    m = _robot_model()
+    ids = body_ids(m, links, source)
+    if qpos.shape[1:] != (m.nq,) or qvel.shape[1:] != (m.nv,) or len(qpos) != len(qvel):
+        raise InputError(source, "qpos/qvel", f"expected (T, {m.nq}) and (T, {m.nv}), got {qpos.shape} and {qvel.shape}")
+    d = mujoco.MjData(m)
+    T, K = len(qpos), len(ids)
+    pos, rot, vel = np.zeros((T, K, 3)), np.zeros((T, K, 3, 3)), np.zeros((T, K, 3))
+    v6 = np.zeros(6)
+    for t in range(T):
+        d.qpos[:], d.qvel[:] = qpos[t], qvel[t]
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_comVel(m, d)
+        pos[t] = d.xpos[ids]
+        rot[t] = d.xmat[ids].reshape(K, 3, 3)
+        for k, i in enumerate(ids):
+            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, i, v6, 0)
+            vel[t, k] = v6[3:]
+    return LinkMotion(tuple(links), pos, rot, vel)

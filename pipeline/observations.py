@@ -1,0 +1,54 @@
+"""Policy observation terms of a G1 trajectory, as plain functions (mjlab style).
+
+* :func:`proprioception` (93 per frame): joint angles (29), joint velocities (29), gravity in the
+  root frame (3), root angular velocity in the root frame (3), the previous frame's action (29;
+  zeros at the first frame) -- the released LessMimic demo's per-frame proprio layout.
+* :func:`root_command` (12 per frame): the sparse target root trajectory ``c_root`` -- the root at
+  ``t + horizon`` seen from the root's heading frame at ``t`` (yaw only, z up): position delta (3),
+  orientation as the first two columns of ``H_t^T R_target`` (6-D rotation, column-major), and the
+  root's linear velocity at the target in the heading frame (3) -- the demo's 12-d movement goal.
+  Near the end of a clip the target is the last frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pipeline.robot import G1_JOINT_NAMES
+from pipeline.rotations import rotation_from_wxyz
+
+PROPRIO_NAMES: tuple[str, ...] = (
+    tuple(f"q.{j}" for j in G1_JOINT_NAMES) + tuple(f"dq.{j}" for j in G1_JOINT_NAMES) + ("gravity_x", "gravity_y", "gravity_z")
+    + ("ang_vel_x", "ang_vel_y", "ang_vel_z") + tuple(f"last_action.{j}" for j in G1_JOINT_NAMES)
+)  # fmt: skip
+ROOT_COMMAND_NAMES: tuple[str, ...] = ("dpos_x", "dpos_y", "dpos_z", "rot6d_0", "rot6d_1", "rot6d_2", "rot6d_3", "rot6d_4", "rot6d_5", "vel_x", "vel_y", "vel_z")
+
+
+def projected_gravity(qpos: np.ndarray) -> np.ndarray:
+    """(T, 3) unit gravity direction in the root frame, ``R_root^T (0, 0, -1)``."""
+    return rotation_from_wxyz(qpos[:, 3:7]).inv().apply([0.0, 0.0, -1.0])
+
+
+def proprioception(qpos: np.ndarray, qvel: np.ndarray, action: np.ndarray) -> np.ndarray:
+    """(T, 93) ``[q, dq, gravity_root, omega_root, a_(t-1)]`` from ``qpos (T, 36)``, MuJoCo ``qvel (T, 35)``
+    (its root angular velocity is already in the root frame) and ``action (T, 29)``."""
+    last = np.concatenate([np.zeros((1, action.shape[1])), action[:-1]])
+    return np.concatenate([qpos[:, 7:], qvel[:, 6:], projected_gravity(qpos), qvel[:, 3:6], last], axis=1)
+
+
+def heading(qpos: np.ndarray) -> Rotation:
+    """The root's heading frame per frame: the rotation about z by the yaw of the root's x-axis."""
+    x = rotation_from_wxyz(qpos[:, 3:7]).apply([1.0, 0.0, 0.0])
+    return Rotation.from_euler("z", np.arctan2(x[:, 1], x[:, 0])[:, None])
+
+
+def root_command(qpos: np.ndarray, qvel: np.ndarray, fps: float, horizon_s: float = 1.0) -> np.ndarray:
+    """(T, 12) ``[H_t^T (p_j - p_t), rot6d(H_t^T R_j), H_t^T v_j]`` with ``j = min(t + horizon fps, T - 1)``."""
+    T = len(qpos)
+    j = np.minimum(np.arange(T) + int(round(horizon_s * fps)), T - 1)
+    h_inv = heading(qpos).inv()
+    dpos = h_inv.apply(qpos[j, :3] - qpos[:, :3])
+    rel = (h_inv * rotation_from_wxyz(qpos[j, 3:7])).as_matrix()
+    rot6d = rel[:, :, :2].transpose(0, 2, 1).reshape(T, 6)
+    return np.concatenate([dpos, rot6d, h_inv.apply(qvel[j, :3])], axis=1)
