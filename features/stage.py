@@ -23,6 +23,7 @@ from pipeline.clip import PhysicalizedClip
 from pipeline.dataset import Feature
 from pipeline.errors import InputError
 from pipeline.interaction import DEMO_PARTS, DF_PARTS, feature_names
+from pipeline.link_motion import body_ids, robot_model
 from pipeline.observations import PROPRIO_NAMES, ROOT_COMMAND_NAMES
 
 CARD_NOTES = [
@@ -88,6 +89,7 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
     from pipeline.ingest import file_stem, stage_dir, write_json_atomic
 
     cfg = config or FeatureConfig()
+    body_ids(robot_model(), cfg.links + cfg.demo_links, "--links")  # an unknown link fails before any work
     src, out = stage_dir(name, "physicalized"), stage_dir(name, "features")
     if not (src / "meta" / "info.json").is_file():
         report = src.parent / "logs" / "physicalized" / "report.json"

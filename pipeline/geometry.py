@@ -52,8 +52,13 @@ class Primitive:
     def half_extents(self) -> np.ndarray:
         """Half-extents of the scaled object's axis-aligned bounding box in its own frame."""
         s = self.size
-        base = {"box": s, "sphere": (s[0],) * 3, "cylinder": (s[0], s[0], s[1]), "capsule": (s[0], s[0], s[1] + s[0])}
-        return np.asarray(base[self.kind]) * np.asarray(self.scale)
+        if self.kind == "box":
+            base = s
+        elif self.kind == "sphere":
+            base = (s[0],) * 3
+        else:  # cylinder / capsule: radius, half-length (the capsule's caps add a radius)
+            base = (s[0], s[0], s[1] + (s[0] if self.kind == "capsule" else 0.0))
+        return np.asarray(base) * np.asarray(self.scale)
 
     def scaled(self, factor) -> "Primitive":
         return Primitive(self.kind, self.size, tuple(np.asarray(self.scale) * np.broadcast_to(factor, (3,))))

@@ -2,9 +2,10 @@
 
 For each frame the robot's ``(qpos, qvel)`` goes into a robot-only MuJoCo model (the G1 of
 :func:`pipeline.robot.g1_xml_path`), forward kinematics places the bodies, and
-``mj_objectVelocity`` gives each body's 6-D velocity at its origin in world orientation; the
-linear part is the link velocity ``v = J_p(q) qd`` of the paper's DF features, exact for the
-simulated state (no finite differences).
+``mj_objectVelocity`` gives each body's 6-D velocity ``(w, v_com)`` in world orientation at its
+centre of mass; the velocity of the body origin (where the features query the field) is
+``v = v_com + w x (x_origin - x_com)``, i.e. ``J_p(q) qd`` for the origin: the link velocity of the
+paper's DF features, exact for the simulated state (no finite differences).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ class LinkMotion:
 
 
 @lru_cache(maxsize=1)
-def _robot_model() -> mujoco.MjModel:
+def robot_model() -> mujoco.MjModel:
     from pipeline.robot import g1_xml_path
 
     return mujoco.MjModel.from_xml_path(str(g1_xml_path()))
@@ -50,7 +51,7 @@ def body_ids(model: mujoco.MjModel, links: tuple[str, ...] | list[str], source: 
 def link_motion(qpos: np.ndarray, qvel: np.ndarray, links: tuple[str, ...], source: str | None = None) -> LinkMotion:
     """Link poses and velocities for G1 ``qpos (T, 36)`` and MuJoCo ``qvel (T, 35)`` (root linear velocity
     in the world, root angular velocity in the root frame, joint velocities)."""
-    m = _robot_model()
+    m = robot_model()
     ids = body_ids(m, links, source)
     if qpos.shape[1:] != (m.nq,) or qvel.shape[1:] != (m.nv,) or len(qpos) != len(qvel):
         raise InputError(source, "qpos/qvel", f"expected (T, {m.nq}) and (T, {m.nv}), got {qpos.shape} and {qvel.shape}")
@@ -65,7 +66,7 @@ def link_motion(qpos: np.ndarray, qvel: np.ndarray, links: tuple[str, ...], sour
         mujoco.mj_comVel(m, d)
         pos[t] = d.xpos[ids]
         rot[t] = d.xmat[ids].reshape(K, 3, 3)
-        for k, i in enumerate(ids):
+        for k, i in enumerate(ids):  # MuJoCo reports a body's velocity at its centre of mass: move it to the origin
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, i, v6, 0)
-            vel[t, k] = v6[3:]
+            vel[t, k] = v6[3:] + np.cross(v6[:3], d.xpos[i] - d.xipos[i])
     return LinkMotion(tuple(links), pos, rot, vel)

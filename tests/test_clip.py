@@ -131,3 +131,9 @@ def test_skeleton_checks():
         Skeleton(("a", "b"), (1, -1))
     with pytest.raises(ValueError, match="not unique"):
         Skeleton(("a", "a"), (-1, 0))
+
+
+def test_half_extents_of_every_primitive():
+    assert Primitive("sphere", (0.1,), (1.0, 2.0, 3.0)).half_extents.tolist() == pytest.approx([0.1, 0.2, 0.3])
+    assert Primitive("capsule", (0.1, 0.2)).half_extents.tolist() == pytest.approx([0.1, 0.1, 0.3])
+    assert Primitive("cylinder", (0.1, 0.2)).half_extents.tolist() == pytest.approx([0.1, 0.1, 0.2])
