@@ -14,7 +14,7 @@ JOBS ?= 1
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install retarget physicalize train-residual features test test-fast bench bench-retarget bench-physicalize clean-venv
+.PHONY: install retarget physicalize train-residual features test test-fast bench bench-retarget bench-physicalize bench-features clean-venv
 
 install: $(VENV)/.installed
 
@@ -60,6 +60,9 @@ bench-retarget: install
 
 bench-physicalize: install
 	$(PY) bench/bench_physicalize.py
+
+bench-features: install
+	$(PY) bench/bench_features.py
 
 clean-venv:
 	rm -rf $(VENV)

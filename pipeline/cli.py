@@ -73,6 +73,9 @@ def _cmd_features(a: argparse.Namespace) -> int:
 
     cfg = FeatureConfig(**({"links": tuple(a.links.split(","))} if a.links else {}))
     report = run_stage(a.name, overwrite=a.overwrite, config=cfg)
+    if "skipped" in report:
+        print(f"features: {report['skipped']}")
+        return 0
     s = report["summary"]
     print(f"features of {s['clips']} clip(s), {s['frames']} frames ({s['frames_per_cpu_s']:.0f} frames per CPU-second) -> datasets/{a.name}/features/")
     return 0

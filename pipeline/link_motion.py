@@ -2,9 +2,9 @@
 
 For each frame the robot's ``(qpos, qvel)`` goes into a robot-only MuJoCo model (the G1 of
 :func:`pipeline.robot.g1_xml_path`), forward kinematics places the bodies, and
-``mj_objectVelocity`` gives each body's 6-D velocity ``(w, v_com)`` in world orientation at its
-centre of mass; the velocity of the body origin (where the features query the field) is
-``v = v_com + w x (x_origin - x_com)``, i.e. ``J_p(q) qd`` for the origin: the link velocity of the
+``mj_comVel`` gives each body's 6-D velocity ``cvel = (w, v_c)`` in world orientation at the centre
+of mass ``c`` of its kinematic tree; the velocity of the body origin ``x`` (where the features query
+the field) is ``v = v_c + w x (x - c)``, i.e. ``J_p(q) qd`` for the origin: the link velocity of the
 paper's DF features, exact for the simulated state (no finite differences).
 """
 
@@ -57,8 +57,8 @@ def link_motion(qpos: np.ndarray, qvel: np.ndarray, links: tuple[str, ...], sour
         raise InputError(source, "qpos/qvel", f"expected (T, {m.nq}) and (T, {m.nv}), got {qpos.shape} and {qvel.shape}")
     d = mujoco.MjData(m)
     T, K = len(qpos), len(ids)
-    pos, rot, vel = np.zeros((T, K, 3)), np.zeros((T, K, 3, 3)), np.zeros((T, K, 3))
-    v6 = np.zeros(6)
+    root_com = m.body_rootid[ids]
+    pos, rot, cvel, offset = np.zeros((T, K, 3)), np.zeros((T, K, 3, 3)), np.zeros((T, K, 6)), np.zeros((T, K, 3))
     for t in range(T):
         d.qpos[:], d.qvel[:] = qpos[t], qvel[t]
         mujoco.mj_kinematics(m, d)
@@ -66,7 +66,7 @@ def link_motion(qpos: np.ndarray, qvel: np.ndarray, links: tuple[str, ...], sour
         mujoco.mj_comVel(m, d)
         pos[t] = d.xpos[ids]
         rot[t] = d.xmat[ids].reshape(K, 3, 3)
-        for k, i in enumerate(ids):  # MuJoCo reports a body's velocity at its centre of mass: move it to the origin
-            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, i, v6, 0)
-            vel[t, k] = v6[3:] + np.cross(v6[:3], d.xpos[i] - d.xipos[i])
+        cvel[t] = d.cvel[ids]
+        offset[t] = d.xpos[ids] - d.subtree_com[root_com]
+    vel = cvel[..., 3:] + np.cross(cvel[..., :3], offset)
     return LinkMotion(tuple(links), pos, rot, vel)

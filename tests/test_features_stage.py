@@ -101,3 +101,15 @@ def test_bad_inputs_are_one_line_errors(tmp_path, monkeypatch, capsys):
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error: ")]  # (the rest: progress bars)
     assert len(err) == 3 and "no physicalized dataset" in err[0] and "'left_hand' is not a body" in err[1] and "no object tracks" in err[2]
     assert not stage_dir("feat", "features").exists() and not stage_dir("bare", "features").exists()
+
+
+def test_nothing_to_do_when_physicalize_kept_no_clip(tmp_path, monkeypatch, capsys):
+    """The physicalize stage ran and found no valid clip: features says so and exits 0, writing nothing."""
+    from pipeline.ingest import write_json_atomic
+
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path))
+    write_json_atomic(tmp_path / "feat" / "logs" / "physicalized" / "report.json", {"summary": {"episodes_written": 0}})
+    assert main(["features", "--name", "feat"]) == 0
+    out = capsys.readouterr().out
+    assert "nothing to do" in out and "KEEP_INVALID=1" in out
+    assert not stage_dir("feat", "features").exists()
