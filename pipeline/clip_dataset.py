@@ -150,7 +150,11 @@ def _objects_back(ep: Episode, source: str) -> tuple[ObjectTrack, ...]:
         c = ep.data.get(f"object.{m['name']}.contact")
         contact = c[:, 0].astype(bool) if c is not None and m.get("has_contact") else None
         pose = ep.data[f"object.{m['name']}.pose"].astype(np.float64)
-        out.append(ObjectTrack(m["name"], geometry_from_dict(m["geometry"]), pose, contact, m.get("mass"), m.get("source", source), m.get("friction")))
+        try:
+            geometry = geometry_from_dict(m["geometry"])
+        except (ValueError, KeyError, TypeError) as exc:  # e.g. a zero scale written by another tool
+            raise InputError(source, f"object {m['name']} geometry", str(exc)) from None
+        out.append(ObjectTrack(m["name"], geometry, pose, contact, m.get("mass"), m.get("source", source), m.get("friction")))
     return tuple(out)
 
 
