@@ -1,5 +1,6 @@
 # LessMimic toolkit. Every target installs what it needs on first use into .venv.
 #   make retarget physicalize features [INPUT=<file or folder>] [NAME=<dataset name>]
+#   (a rerun with the same input and options does nothing: each stage checks the fingerprint in its report.json)
 #   make test
 #   make bench
 PYTHON ?= python3.11

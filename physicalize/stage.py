@@ -9,7 +9,9 @@ state-action trajectory (:mod:`physicalize.rollout`), replay the actions open lo
 self-consistency, and measure the validity figures (:mod:`physicalize.validate`). Invalid clips stay
 in the report with their reason and are left out of the dataset unless ``keep_invalid``. A clip
 that raises is reported invalid with the error; the batch goes on. Finished clips are cached in
-``datasets/<NAME>/.work/physicalize/`` so an interrupted run resumes; the run is deterministic.
+``datasets/<NAME>/.work/physicalize/`` so an interrupted run resumes; the run is deterministic. A
+rerun on the same retarget dataset with the same options is up to date (:func:`run_fingerprint`,
+recorded in ``logs/physicalized/report.json``) and does nothing.
 """
 
 from __future__ import annotations
@@ -239,8 +241,20 @@ def _physicalized(r: ClipResult) -> PhysicalizedClip:
     return PhysicalizedClip(r.robot, roll.qvel[:, :35], vel, roll.action, roll.torque, roll.foot_force, r.com["reference_qpos"][:T], r.figures)
 
 
+def run_fingerprint(src: Path, spec: TeacherSpec, profile: str, keep_invalid: bool) -> str:
+    """What a run's output depends on (:mod:`pipeline.stage_state`): the retargeted dataset at ``src``,
+    the teacher (with its checkpoint's digest, not its path), the actuator profile and ``keep_invalid``."""
+    from pipeline.stage_state import dataset_fingerprint, fingerprint
+
+    return fingerprint(stage="physicalized", retargeted=dataset_fingerprint(src), teacher=spec.name, teacher_sha256=spec.digest,
+                       actuator_profile=profile, keep_invalid=keep_invalid)  # fmt: skip
+
+
 def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", profile: str = "mjlab", keep_invalid: bool = False) -> dict:
-    """``lessmimic physicalize``: simulate every retargeted clip, write the dataset, report and logs."""
+    """``lessmimic physicalize``: simulate every retargeted clip, write the dataset, report and logs.
+    Without ``overwrite``, a run whose logs report records this run's :func:`run_fingerprint`, and whose
+    dataset exists (or kept no clip), is up to date: that report comes back with ``"up_to_date": True``
+    and nothing is done."""
     from pipeline.clip_dataset import episodes_to_robot_clips, physicalized_clips_to_episodes
     from pipeline.dataset import write_dataset
     from pipeline.dataset_card import DatasetCard
@@ -248,6 +262,7 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
     from pipeline.ingest import file_stem, stage_dir, write_json_atomic
     from pipeline.inspect_log import write_robot_log
     from pipeline.robot import actuator_profile
+    from pipeline.stage_state import KEY, up_to_date
     from physicalize.plot import plot_physicalized
     from physicalize.validate import summarise
 
@@ -266,6 +281,10 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
     src, out = stage_dir(name, "retargeted"), stage_dir(name, "physicalized")
     if not (src / "meta" / "info.json").is_file():
         raise InputError(src, "meta/info.json", "no retargeted dataset here: run `lessmimic retarget --name NAME` first")
+    fp, logs = run_fingerprint(src, spec, prof.name, keep_invalid), out.parent / "logs" / "physicalized"
+    recorded = None if overwrite else up_to_date(logs / "report.json", fp)
+    if recorded is not None and (out.is_dir() or not recorded["summary"].get("episodes_written")):
+        return {**recorded, "up_to_date": True}
     check_target(out, overwrite)
     clips = episodes_to_robot_clips(src)
     t0 = time.perf_counter()
@@ -285,7 +304,7 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
         "clips": per_clip, "summary": {**summarise([c for c in per_clip if "frames" in c] or per_clip),
                                          "valid_frac": float(np.mean([c["valid"] for c in per_clip])) if per_clip else 0.0,
                                          "realtime_factor": simulated / max(sum(r.rollout.seconds for r in results if r.rollout), 1e-9),
-                                         "episodes_written": len(kept)},
+                                         "episodes_written": len(kept)}, KEY: fp,
     }  # fmt: skip
     for c in per_clip:
         if not c["valid"]:
@@ -305,16 +324,15 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
             feature_frames={f.name: "world, z-up" if f.name.startswith("object.") else "" for f in features}, notes=CARD_NOTES + [teacher_note],
         )  # fmt: skip
         write_dataset(out, f"lessmimic/{name}-physicalized", fps, features, episodes, card=card, overwrite=overwrite)
-    report["seconds_wall"] = time.perf_counter() - t0
-    logs = out.parent / "logs" / "physicalized"
-    write_json_atomic(logs / "report.json", report)  # also where it lives when no clip was valid
-    if kept:
-        write_json_atomic(out / "report.json", report)
     for r in tqdm([r for r in results if r.robot is not None], desc="logs and plots", unit="clip"):
         stem = f"{r.index:03d}_{file_stem(r.source)}"
         write_robot_log(r.robot, logs / f"{stem}.mcap")
         objs = {o.name: (clips[r.index].objects[k].pose[:, 2], o.pose[:, 2]) for k, o in enumerate(r.robot.objects)}
         title = f"{r.source} ({r.robot.task or 'no task'}): {'valid' if r.figures['valid'] else 'INVALID: ' + r.figures['reason']}"
         plot_physicalized(r.com, r.rollout.foot_force, objs, r.robot.fps, title[:150], logs / f"{stem}.png")
+    report["seconds_wall"] = time.perf_counter() - t0
+    if kept:
+        write_json_atomic(out / "report.json", report)
+    write_json_atomic(logs / "report.json", report)  # also where it lives when no clip was valid; last: its fingerprint marks a finished run
     shutil.rmtree(work, ignore_errors=True)
     return report

@@ -4,7 +4,9 @@ Stages read ``--input`` (a mocap file or folder; default: the embedded synthetic
 demonstrations) and write ``datasets/<NAME>/<stage>/``, a LeRobot v3.0 dataset root
 with a ``report.json``; inspection logs go to ``datasets/<NAME>/logs/<stage>/``.
 Bad input stops with one line ``error: <file>: frame <k>: <field>: <problem>`` and exit
-status 2, leaving no partial output.
+status 2, leaving no partial output. A rerun on the same input with the same options finds
+its output up to date and does nothing (:mod:`pipeline.stage_state`); other input or options
+over an existing output need ``--overwrite``.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import sys
 from pathlib import Path
 
 from pipeline.errors import InputError
+from pipeline.stage_state import up_to_date_line
 
 def _stage_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--input", default=None, help="mocap file or folder (BVH, OMOMO .pt, AMASS .npz, C3D, MCAP, keypoints .npz/.csv); default: embedded synthetic demos")
@@ -26,6 +29,9 @@ def _cmd_retarget(a: argparse.Namespace) -> int:
     from retarget.stage import run_stage
 
     report = run_stage(a.input, a.name, overwrite=a.overwrite, jobs=a.jobs, body_model=a.body_model, height_override=a.height)
+    if report.get("up_to_date"):
+        print(up_to_date_line("retarget", a.name, "retargeted"))
+        return 0
     s = report["summary"]
     print(f"retargeted {len(report['clips'])} clip(s), {len(report['failed'])} failed -> datasets/{a.name}/retargeted/")
     for k in ("object_penetration_frac_1cm", "ground_penetration_frac_1cm", "float_frac_2cm", "foot_slide_frac_1cm_per_frame",
@@ -39,6 +45,9 @@ def _cmd_physicalize(a: argparse.Namespace) -> int:
     from physicalize.stage import run_stage
 
     report = run_stage(a.name, overwrite=a.overwrite, teacher=a.teacher, profile=a.profile, keep_invalid=a.keep_invalid)
+    if report.get("up_to_date"):
+        print(up_to_date_line("physicalize", a.name, "physicalized"))
+        return 0
     s = report["summary"]
     n, kept = len(report["clips"]), s.get("episodes_written", 0)
     where = f"datasets/{a.name}/physicalized/" if kept else f"nothing written (report: datasets/{a.name}/logs/physicalized/report.json)"

@@ -9,7 +9,9 @@ as the physics, label per-link contacts from the human's, and measure
 :func:`pipeline.metrics.retarget_metrics`. A finished clip is cached in
 ``datasets/<NAME>/.work/retarget/`` (keyed by the clip's data and index), so a re-run after an
 interruption resumes where it stopped (``--overwrite`` starts afresh; a finished stage removes
-the cache); a failing clip is reported with its one-line error and the others go on.
+the cache); a failing clip is reported with its one-line error and the others go on. A rerun on
+the same input with the same options finds the dataset up to date (:func:`input_fingerprint`,
+recorded in ``report.json``) and does nothing.
 """
 
 from __future__ import annotations
@@ -146,9 +148,27 @@ def _feature_frames(features) -> dict[str, str]:
     return {f.name: frames.get(f.name, "world, z-up" if f.name.endswith(".pose") else "") for f in features}
 
 
+def input_fingerprint(input_path: str | None, *, body_model: str | None = None, height_override: float | None = None) -> str:
+    """What a run's output depends on (:mod:`pipeline.stage_state`): every input file's path, size and
+    mtime (the embedded default: its generator's source code), the body model's, and the height
+    override; not ``jobs``, which changes only the speed."""
+    from pipeline import default_input, synthetic
+    from pipeline.stage_state import files_fingerprint, fingerprint
+
+    if input_path is None:
+        generator = [Path(default_input.__file__), *sorted(Path(synthetic.__file__).parent.glob("*.py"))]
+        source = "embedded default " + files_fingerprint(generator, by_content=True)
+    else:
+        source = files_fingerprint([input_path])
+    body = files_fingerprint([body_model]) if body_model else None
+    return fingerprint(stage="retargeted", method=METHOD, fps=FPS, input=source, body_model=body, height=height_override)
+
+
 def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, jobs: int = 1, body_model: str | None = None,
               height_override: float | None = None) -> dict:  # fmt: skip
-    """``lessmimic retarget``: ingest, retarget every clip, write the dataset, report and logs."""
+    """``lessmimic retarget``: ingest, retarget every clip, write the dataset, report and logs. Without
+    ``overwrite``, an existing dataset whose report records this run's :func:`input_fingerprint` is up
+    to date: its report comes back with ``"up_to_date": True`` and nothing is done."""
     from pipeline.clip_dataset import robot_clips_to_episodes
     from pipeline.dataset import write_dataset
     from pipeline.dataset_card import DatasetCard
@@ -156,9 +176,14 @@ def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, job
     from pipeline.ingest import file_stem, ingest, stage_dir, write_json_atomic
     from pipeline.inspect_log import write_robot_log
     from pipeline.metrics import summarise
+    from pipeline.stage_state import KEY, up_to_date
     from retarget.plot import plot_clip
 
     out = stage_dir(name, "retargeted")
+    fp = input_fingerprint(input_path, body_model=body_model, height_override=height_override)
+    recorded = None if overwrite or not out.is_dir() else up_to_date(out / "report.json", fp)
+    if recorded is not None:
+        return {**recorded, "up_to_date": True}
     check_target(out, overwrite)
     t0 = time.perf_counter()
     work = out.parent / ".work" / "retarget"
@@ -173,7 +198,7 @@ def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, job
     report = {
         "stage": "retargeted", "method": METHOD, "fps": FPS, "input": input_path or "embedded synthetic default",
         "clips": [{"source": r.source, "task": r.robot.task, **r.metrics, "scale": r.scale} for r in done],
-        "failed": failed, "summary": summarise([r.metrics for r in done]) if done else {},
+        "failed": failed, "summary": summarise([r.metrics for r in done]) if done else {}, KEY: fp,
     }  # fmt: skip
     if done:
         synthetic = any(r.robot.provenance.get("synthetic") for r in done)
@@ -186,11 +211,11 @@ def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, job
             license="apache-2.0" if synthetic else "other", feature_frames=_feature_frames(features), notes=CARD_NOTES,
         )  # fmt: skip
         write_dataset(out, f"lessmimic/{name}-retargeted", FPS, features, episodes, card=card, overwrite=overwrite)
-        write_json_atomic(out / "report.json", {**report, "seconds_wall": time.perf_counter() - t0})
         logs = out.parent / "logs" / "retargeted"
         for k, r in enumerate(tqdm(done, desc="logs and plots", unit="clip")):
             stem = f"{k:03d}_{file_stem(r.source)}"
             write_robot_log(r.robot, logs / f"{stem}.mcap")
             plot_clip(r.robot, human.clips[r.index].resampled(FPS), logs / f"{stem}.png")
+        write_json_atomic(out / "report.json", {**report, "seconds_wall": time.perf_counter() - t0})  # last: its fingerprint marks a finished run
         shutil.rmtree(work, ignore_errors=True)  # finished: the resume cache has served its purpose
     return report

@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from pipeline.cli import main
@@ -48,9 +49,11 @@ def test_default_chain_writes_and_reloads_the_human_dataset(tmp_path, monkeypatc
     assert robot[0]["source_frame"].item() == 0 and robot[robot.num_frames - 1]["source_frame"].item() > 0
     assert len(list((tmp_path / "default" / "logs" / "retargeted").glob("*.mcap"))) == 4
     assert len(list((tmp_path / "default" / "logs" / "retargeted").glob("*.png"))) == 4
-    # A second run refuses to overwrite, with one line, and leaves the dataset intact.
+    # A second run is up to date; one with another option refuses to overwrite, with one line; the dataset stays intact.
     capsys.readouterr()
-    assert main(["retarget"]) == 2
+    assert main(["retarget"]) == 0
+    assert capsys.readouterr().out == "retarget: datasets/default/retargeted/ is up to date (same input and options); nothing to do\n"
+    assert main(["retarget", "--height", "1.7"]) == 2
     err = capsys.readouterr().err
     assert "--overwrite" in err and err.count("\n") == 1
     assert LeRobotDataset("lessmimic/default-human", root=root).num_frames == ds.num_frames
@@ -61,9 +64,46 @@ def test_default_chain_writes_and_reloads_the_human_dataset(tmp_path, monkeypatc
     assert all(c["valid"] or c["reason"] for c in report["clips"])
     assert code == 0
     capsys.readouterr()
+    assert main(["physicalize"]) == 0  # up to date, whether or not a clip was valid (and a dataset written)
+    assert "physicalized/ is up to date" in capsys.readouterr().out
     assert main(["load", str(root)]) == 0
     out = capsys.readouterr().out
     assert f"4 episodes, {ds.num_frames} frames at 30 fps" in out and "observation.joint_pos: float32 (66,)" in out
+
+
+def _tree(folder):
+    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(folder.rglob("*"))}
+
+
+def test_retarget_rerun_on_the_same_input_does_nothing(tmp_path, monkeypatch, capsys):
+    from pipeline.default_input import default_clips
+
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path / "datasets"))
+    clip = next(c for c in default_clips() if c.task == "Push")
+    take = tmp_path / "take.npz"
+
+    def save(frames: int) -> None:  # a short keypoints take (a few seconds of IK)
+        np.savez(take, joint_pos=clip.joint_pos[:frames], joint_names=np.array(clip.skeleton.joint_names),
+                 parents=np.array(clip.skeleton.parents), fps=clip.fps)  # fmt: skip
+
+    save(15)
+    args = ["retarget", "--input", str(take), "--name", "take"]
+    assert main(args) == 0
+    before = _tree(tmp_path / "datasets")
+    capsys.readouterr()
+    assert main(args + ["-j", "2"]) == 0  # the number of worker processes does not change the output
+    out, err = capsys.readouterr()
+    assert out == "retarget: datasets/take/retargeted/ is up to date (same input and options); nothing to do\n" and err == ""
+    assert _tree(tmp_path / "datasets") == before  # nothing rewritten, not even touched
+    assert main(args + ["--height", "1.6"]) == 2  # another option
+    save(16)  # another input
+    assert main(args) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2 and all("retargeted: dataset: already exists; pass --overwrite" in e for e in err)
+    assert _tree(tmp_path / "datasets") == before
+    assert main(args + ["--overwrite"]) == 0
+    capsys.readouterr()
+    assert main(args) == 0 and "is up to date" in capsys.readouterr().out
 
 
 @needs_shared

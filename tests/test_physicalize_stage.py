@@ -57,9 +57,18 @@ def test_valid_clip_written_invalid_one_reported(retargeted, capsys):
     assert "mjlab" in (root / "README.md").read_text()
     logs = retargeted / "hand" / "logs" / "physicalized"
     assert (logs / "001_hand-made_teleport.png").is_file() and (logs / "000_hand-made_stand.mcap").is_file()
-    assert main(["physicalize", "--name", "hand"]) == 2  # exists: needs --overwrite
+    written = {p: p.stat().st_mtime_ns for p in retargeted.rglob("*")}
+    capsys.readouterr()
+    assert main(["physicalize", "--name", "hand"]) == 0  # same input and options: up to date, nothing rewritten
+    assert capsys.readouterr().out == "physicalize: datasets/hand/physicalized/ is up to date (same input and options); nothing to do\n"
+    assert {p: p.stat().st_mtime_ns for p in retargeted.rglob("*")} == written
+    assert main(["physicalize", "--name", "hand", "--keep-invalid"]) == 2  # another option: needs --overwrite
+    assert "physicalized: dataset: already exists; pass --overwrite" in capsys.readouterr().err
     assert main(["physicalize", "--name", "hand", "--overwrite", "--keep-invalid"]) == 0
     assert LeRobotDataset("lessmimic/hand-physicalized", root=root).num_episodes == 2
+    features, episodes = robot_clips_to_episodes(_clips()[:1])  # another retargeted dataset: its output is not up to date
+    write_dataset(stage_dir("hand", "retargeted"), "lessmimic/hand-retargeted", 50, features, episodes, overwrite=True)
+    assert main(["physicalize", "--name", "hand", "--keep-invalid"]) == 2
 
 
 def test_bad_arguments_are_one_line_errors(retargeted, capsys):
