@@ -7,7 +7,8 @@ interaction features of :mod:`features.compute`: ``observation.df`` (the paper's
 ``observation.df_relative`` (v relative to the object's closest surface point), ``observation.df_demo``
 (the released demo's 7 x 4 layout), ``observation.df_object`` (nearest object per link, with several
 objects), ``observation.root_command`` (12) and ``observation.proprio`` (93). The task label is the
-episode's LeRobot task. The dataset is written atomically; the stage takes seconds per clip.
+episode's LeRobot task. The dataset is written atomically; the stage takes seconds per clip. A rerun on
+the same physicalized dataset with the same config is up to date and does nothing (:mod:`pipeline.stage_state`).
 """
 
 from __future__ import annotations
@@ -87,6 +88,7 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
     from pipeline.dataset_read import read_card
     from pipeline.dataset_write import check_target
     from pipeline.ingest import file_stem, stage_dir, write_json_atomic
+    from pipeline.stage_state import KEY, dataset_fingerprint, fingerprint, up_to_date
 
     cfg = config or FeatureConfig()
     body_ids(robot_model(), cfg.links + cfg.demo_links, "--links")  # an unknown link fails before any work
@@ -99,6 +101,10 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
         why = (f"nothing to do: the physicalize stage kept no clip (none valid; see {ran}); "
                "`make physicalize KEEP_INVALID=1 OVERWRITE=1` keeps invalid clips with their validation figures")  # fmt: skip
         return {"stage": "features", "skipped": why, "clips": [], "summary": {"clips": 0, "frames": 0, "frames_per_cpu_s": 0.0}}
+    fp, logs = fingerprint(stage="features", physicalized=dataset_fingerprint(src), config=asdict(cfg)), out.parent / "logs" / "features"
+    recorded = None if overwrite or not out.is_dir() else up_to_date(logs / "report.json", fp)
+    if recorded is not None:
+        return {**recorded, "up_to_date": True}
     check_target(out, overwrite)
     clips = episodes_to_physicalized_clips(src)
     names = [o.name for o in clips[0].robot.objects]
@@ -121,7 +127,7 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
         ep.meta.update({"stage": "features", "features": asdict(cfg)})
     frames = sum(c["frames"] for c in per_clip)
     cpu = sum(c["cpu_s"] for c in per_clip)
-    report = {"stage": "features", "config": asdict(cfg), "clips": per_clip,
+    report = {"stage": "features", "config": asdict(cfg), "clips": per_clip, KEY: fp,
               "summary": {"clips": len(clips), "frames": frames, "cpu_s": cpu, "frames_per_cpu_s": frames / max(cpu, 1e-9)}}  # fmt: skip
     prev = read_card(src)
     synthetic = any(c.robot.provenance.get("synthetic") for c in clips)
@@ -134,11 +140,10 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
         feature_frames={**(prev.feature_frames if prev else {}), **_FRAMES}, notes=(prev.notes if prev else []) + CARD_NOTES,
     )  # fmt: skip
     write_dataset(out, f"lessmimic/{name}-features", int(round(clips[0].robot.fps)), features, episodes, card=card, overwrite=overwrite)
-    report["seconds_wall"] = time.perf_counter() - t0
-    write_json_atomic(out / "report.json", report)
-    logs = out.parent / "logs" / "features"
-    write_json_atomic(logs / "report.json", report)
     for k, (clip, f) in enumerate(zip(clips, extra)):
         title = f"{clip.robot.source} ({clip.robot.task or 'no task'}): DF over {len(cfg.links)} links"
         plot_df(f.df, _any_contact(clip), clip.robot.fps, title[:150], logs / f"{k:03d}_{file_stem(clip.robot.source)}.png")
+    report["seconds_wall"] = time.perf_counter() - t0
+    write_json_atomic(out / "report.json", report)
+    write_json_atomic(logs / "report.json", report)  # last: its fingerprint marks a finished run
     return report

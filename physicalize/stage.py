@@ -324,6 +324,8 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
             feature_frames={f.name: "world, z-up" if f.name.startswith("object.") else "" for f in features}, notes=CARD_NOTES + [teacher_note],
         )  # fmt: skip
         write_dataset(out, f"lessmimic/{name}-physicalized", fps, features, episodes, card=card, overwrite=overwrite)
+    elif out.is_dir():  # --overwrite and nothing kept: the old dataset is not this run's output
+        shutil.rmtree(out)
     for r in tqdm([r for r in results if r.robot is not None], desc="logs and plots", unit="clip"):
         stem = f"{r.index:03d}_{file_stem(r.source)}"
         write_robot_log(r.robot, logs / f"{stem}.mcap")

@@ -82,6 +82,9 @@ def _cmd_features(a: argparse.Namespace) -> int:
 
     cfg = FeatureConfig(**({"links": tuple(a.links.split(","))} if a.links else {}))
     report = run_stage(a.name, overwrite=a.overwrite, config=cfg)
+    if report.get("up_to_date"):
+        print(up_to_date_line("features", a.name, "features"))
+        return 0
     if "skipped" in report:
         print(f"features: {report['skipped']}")
         return 0

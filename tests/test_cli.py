@@ -27,7 +27,7 @@ def test_bad_dataset_name_is_one_line_error(name, tmp_path, monkeypatch, capsys)
 
 
 @pytest.mark.slow
-def test_default_chain_writes_and_reloads_the_human_dataset(tmp_path, monkeypatch, capsys):
+def test_default_chain_retarget_physicalize_features(tmp_path, monkeypatch, capsys):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path))
@@ -69,6 +69,21 @@ def test_default_chain_writes_and_reloads_the_human_dataset(tmp_path, monkeypatc
     assert main(["load", str(root)]) == 0
     out = capsys.readouterr().out
     assert f"4 episodes, {ds.num_frames} frames at 30 fps" in out and "observation.joint_pos: float32 (66,)" in out
+    # The third stage, on every simulated clip (valid or not: each episode carries its validation figures).
+    kept = report["summary"]["episodes_written"]
+    if kept == 0:
+        assert main(["features"]) == 0 and "nothing to do" in capsys.readouterr().out
+        assert main(["physicalize", "--keep-invalid", "--overwrite"]) == 0
+    assert main(["features"]) == 0 and main(["features"]) == 0
+    assert "features/ is up to date" in capsys.readouterr().out
+    feats = LeRobotDataset("lessmimic/default-features", root=tmp_path / "default" / "features",
+                           delta_timestamps={"observation.df": [-0.08, -0.06, -0.04, -0.02, 0.0]})  # fmt: skip
+    physicalized = LeRobotDataset("lessmimic/default-physicalized", root=tmp_path / "default" / "physicalized")
+    assert feats.num_episodes == physicalized.num_episodes and feats.num_frames == physicalized.num_frames > 0
+    item = feats[feats.num_frames - 1]
+    assert tuple(item["observation.df"].shape) == (5, 140) and not item["observation.df_is_pad"].any()
+    assert item["observation.df"][:, 0].min() >= 0 and tuple(item["observation.df_demo"].shape) == (28,)
+    assert len(list((tmp_path / "default" / "logs" / "features").glob("*.png"))) == feats.num_episodes
 
 
 def _tree(folder):

@@ -78,6 +78,13 @@ def test_features_dataset_loads_with_interaction_windows(tmp_path, monkeypatch, 
     assert "delta_timestamps" in card and "| `observation.df_demo` |" in card
     logs = tmp_path / "feat" / "logs" / "features"
     assert (logs / "000_hand-made_PickUp.png").is_file() and (logs / "001_hand-made_Push.png").is_file()
+    # A rerun on the same input does nothing; other options need --overwrite.
+    stamp = {p: p.stat().st_mtime_ns for p in root.rglob("*")}
+    capsys.readouterr()
+    assert main(["features", "--name", "feat"]) == 0
+    assert "is up to date" in capsys.readouterr().out and stamp == {p: p.stat().st_mtime_ns for p in root.rglob("*")}
+    assert main(["features", "--name", "feat", "--links", "pelvis"]) == 2
+    assert "--overwrite" in capsys.readouterr().err
 
 
 def test_two_objects_give_the_nearest_object_per_link(tmp_path, monkeypatch):
