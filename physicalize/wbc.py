@@ -102,7 +102,7 @@ class WBCConfig:
     step_gain: float = 1.0  # landing point shift per metre of DCM error
     step_max: float = 0.2  # m, largest shift
     com_anchor: float = 0.5  # the CoM target moves by this fraction of the stance feet's offset from their footsteps
-    min_foot_gap: float = 0.14  # m, least lateral distance of the swing foot from the stance foot (no crossing)
+    min_foot_gap: float = 0.08  # m, least lateral distance of the swing foot from the stance foot (no crossing; 0.14 moved narrow footsteps outward: frames 4557 -> 4877)
 
 
 @dataclass
