@@ -49,6 +49,7 @@ def bench_stage(name: str) -> None:
         print(f"| {c['source']} | {c['frames']} | {c['frames_per_cpu_s']:.0f} | {c['link_queries_per_cpu_s'] / 1e3:.0f}k | {c['phi_min_m']:.3f} |")
     s = report["summary"]
     print(f"| total | {s['frames']} | {s['frames_per_cpu_s']:.0f} | | |")
+    print(f"loading the objects' fields (meshes, warp), once per geometry: {s['fields_setup_cpu_s']:.1f} CPU-s")
     print(f"whole command (read, compute, write LeRobot dataset, plots): {wall:.1f} s wall for {s['frames']} frames")
 
 

@@ -89,7 +89,8 @@ def _cmd_features(a: argparse.Namespace) -> int:
         print(f"features: {report['skipped']}")
         return 0
     s = report["summary"]
-    print(f"features of {s['clips']} clip(s), {s['frames']} frames ({s['frames_per_cpu_s']:.0f} frames per CPU-second) -> datasets/{a.name}/features/")
+    print(f"features of {s['clips']} clip(s), {s['frames']} frames ({s['frames_per_cpu_s']:.0f} frames per CPU-second, "
+          f"+ {s['fields_setup_cpu_s']:.1f} CPU-s loading the objects' fields) -> datasets/{a.name}/features/")
     return 0
 
 
