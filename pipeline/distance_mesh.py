@@ -38,17 +38,10 @@ from pipeline.collision_mesh import cache_dir, load_mesh
 from pipeline.distance_octree import CachedField, OctreeSpec
 from pipeline.errors import InputError
 from pipeline.geometry import MeshGeometry
+from pipeline.warp_runtime import warp as _warp
 
 EPS_MESH = 1e-6  # m: below this the direction (p - c)/phi is float32 noise; the face normal is used
 _MAX_DIST = 1.0e6
-
-
-def _warp():
-    import warp as wp
-
-    wp.config.log_level = wp.LOG_WARNING  # no greeting or per-module load lines on stdout
-    wp.init()
-    return wp
 
 
 _KERNEL = None

@@ -13,7 +13,9 @@ Closed forms: box (clamp; inside, the nearest face), sphere (radial), cylinder (
 axial clamp; inside, the nearer of side and cap), capsule (distance to the axis segment minus
 the radius). A per-axis scale keeps a box a box but turns a sphere into an ellipsoid, a
 cylinder into an elliptic cylinder and a capsule into an elliptic cylinder with ellipsoidal
-caps; those use :mod:`pipeline.distance_ellipsoid` (exact to rounding). For the scaled capsule
+caps; those use :mod:`pipeline.distance_ellipsoid` (exact to rounding), run point by point in the
+fused float64 warp kernels of :mod:`pipeline.distance_scaled_warp` (numpy, torch CPU or CUDA; the
+numpy/torch ``local_xp`` where warp cannot run, and as the kernels' reference). For the scaled capsule
 (fold z to z >= 0, cap ellipsoid E centred at +H):
 
 * outside: the solid is convex and symmetric, so the nearer of the projections onto the
@@ -33,6 +35,7 @@ import numpy as np
 from pipeline.array_ns import nonzero
 from pipeline.distance_ellipsoid import Ellipsoid
 from pipeline.geometry import Chair, Primitive
+from pipeline.warp_runtime import runs_on
 
 EPS = 1e-9  # m: a point this close to the surface takes the outward normal as its direction
 
@@ -123,6 +126,14 @@ class SphereShape:
             safe = xp.where(rho > 0, rho, 1.0)
             u = (xp.where(rho > 0, x / safe, 1.0), y / safe, z / safe)
             return abs(rho - r), u, (r * u[0], r * u[1], r * u[2])
+        if runs_on(x):
+            from pipeline import distance_scaled_warp
+
+            return distance_scaled_warp.sphere(self.radii, x, y, z, xp)
+        return self.local_xp(x, y, z, xp)
+
+    def local_xp(self, x, y, z, xp):
+        """The ellipsoid's field in numpy/torch (where warp cannot run; the kernel's reference)."""
         e = Ellipsoid(self.radii)
         c = e.closest([x, y, z], xp)
         d = (x - c[0], y - c[1], z - c[2])
@@ -141,6 +152,14 @@ class CylinderShape:
     half_length: float
 
     def local(self, x, y, z, xp):
+        if not _isotropic(self.radii) and runs_on(x):
+            from pipeline import distance_scaled_warp
+
+            return distance_scaled_warp.cylinder(self.radii, self.half_length, x, y, z, xp)
+        return self.local_xp(x, y, z, xp)
+
+    def local_xp(self, x, y, z, xp):
+        """The field in numpy/torch (a circular section, or where warp cannot run; the kernel's reference)."""
         h = self.half_length
         qx, qy, nx, ny, in_sec = _Section(self.radii).closest(x, y, xp)
         cx, cy, cz = xp.where(in_sec, x, qx), xp.where(in_sec, y, qy), xp.clip(z, -h, h)
@@ -173,6 +192,14 @@ class CapsuleShape:
     def local(self, x, y, z, xp):
         if _isotropic(self.radii):
             return self._round(x, y, z, xp)
+        if runs_on(x):
+            from pipeline import distance_scaled_warp
+
+            return distance_scaled_warp.capsule(self.radii, self.half_length, x, y, z, xp)
+        return self.local_xp(x, y, z, xp)
+
+    def local_xp(self, x, y, z, xp):
+        """The scaled capsule's field in numpy/torch (where warp cannot run; the kernel's reference)."""
         h = self.half_length
         sz, w = _sign(z), abs(z)  # fold onto z >= 0
         cap = Ellipsoid(self.radii)
