@@ -104,7 +104,8 @@ PRIMS = [
 
 def _points(prim: Primitive, n: int) -> np.ndarray:
     ext = np.abs(np.concatenate([f(*np.meshgrid(np.linspace(*ur, 9), np.linspace(*vr, 9))).reshape(-1, 3) for f, ur, vr in _patches(prim)]))
-    p = RNG.uniform(-1.4, 1.4, (n, 3)) * ext.max(axis=0) * np.asarray(prim.scale)
+    rng = np.random.default_rng(7)  # per call: the points do not depend on which tests ran before (xdist order)
+    p = rng.uniform(-1.4, 1.4, (n, 3)) * ext.max(axis=0) * np.asarray(prim.scale)
     p[:8, :2] = 0.0  # on the axis
     p[8:16, 2] = 0.0  # on the mid-plane
     return p
@@ -116,7 +117,7 @@ def test_phi_equals_brute_force_distance_inside_and_outside(prim):
     phi, g, c = primitive_shape(prim).local(*p.T, np)
     g, c = np.stack(g, 1), np.stack(c, 1)
     inside = inside_solid(prim, p)
-    assert 0.2 < inside.mean() < 0.8
+    assert 0.1 < inside.mean() < 0.8  # a sphere fills 19% of the sampled box: both sides are well covered
     np.testing.assert_allclose(phi, brute_distance(prim, p), rtol=0, atol=1e-6)
     np.testing.assert_allclose(np.linalg.norm(p - c, axis=1), phi, rtol=0, atol=1e-12)
     assert primitive_shape(prim).local(*c.T, np)[0].max() < 1e-9  # closest points lie on the surface
