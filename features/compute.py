@@ -38,6 +38,11 @@ class FeatureConfig:
     root_horizon_s: float = 1.0
     history: int = 5
 
+    @property
+    def query_links(self) -> tuple[str, ...]:
+        """Every link the fields are queried at: ``links`` then the ``demo_links`` not among them."""
+        return tuple(dict.fromkeys(self.links + self.demo_links))
+
     def __post_init__(self):
         if not self.links or len(set(self.links)) != len(self.links):
             raise InputError(None, "links", f"need distinct link names, got {list(self.links)}")
@@ -88,7 +93,7 @@ def clip_features(clip: PhysicalizedClip, cfg: FeatureConfig, cache: FieldCache 
     if not robot.objects:
         raise InputError(robot.source, "objects", "no object tracks: distance-field features need at least one object")
     fields = (cache or FieldCache()).fields(clip)
-    links = tuple(dict.fromkeys(cfg.links + cfg.demo_links))
+    links = cfg.query_links
     motion = link_motion(robot.qpos, clip.qvel, links, robot.source)
     poses = np.stack([o.pose for o in robot.objects], axis=1)  # (T, M, 7)
     near = fields.query_links(motion.pos, poses)

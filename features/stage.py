@@ -91,7 +91,7 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
     from pipeline.stage_state import KEY, dataset_fingerprint, fingerprint, up_to_date
 
     cfg = config or FeatureConfig()
-    body_ids(robot_model(), cfg.links + cfg.demo_links, "--links")  # an unknown link fails before any work
+    body_ids(robot_model(), cfg.query_links, "--links")  # an unknown link fails before any work
     src, out = stage_dir(name, "physicalized"), stage_dir(name, "features")
     if not (src / "meta" / "info.json").is_file():
         ran = src.parent / "logs" / "physicalized" / "report.json"
@@ -121,7 +121,7 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
         cpu = max(time.process_time() - c0, 1e-9)
         extra.append(f)
         per_clip.append({"source": clip.robot.source, "task": clip.robot.task, "frames": clip.frames, "cpu_s": cpu, "frames_per_cpu_s": clip.frames / cpu,
-                         "link_queries_per_cpu_s": clip.frames * len(dict.fromkeys(cfg.links + cfg.demo_links)) / cpu,
+                         "link_queries_per_cpu_s": clip.frames * len(cfg.query_links) / cpu,
                          "phi_min_m": float(f.df[..., 0].min()), "valid": bool(clip.validation.get("valid", False))})  # fmt: skip
     features, episodes = physicalized_clips_to_episodes(clips)
     features += _features(cfg, names)

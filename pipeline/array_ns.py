@@ -45,8 +45,8 @@ def nonzero(mask, xp):
     return np.flatnonzero(mask) if xp is np else mask.nonzero().squeeze(1)
 
 
-def concat(arrays, xp):
-    return np.concatenate(arrays) if xp is np else xp.cat(arrays)
+def concat(arrays, xp, axis: int = 0):
+    return np.concatenate(arrays, axis) if xp is np else xp.cat(arrays, axis)
 
 
 def full(n: int, value, like, xp):

@@ -18,6 +18,7 @@ from pathlib import Path
 from pipeline.errors import InputError
 from pipeline.stage_state import up_to_date_line
 
+
 def _stage_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--input", default=None, help="mocap file or folder (BVH, OMOMO .pt, AMASS .npz, C3D, MCAP, keypoints .npz/.csv); default: embedded synthetic demos")
     p.add_argument("--name", default="default", help="dataset name: outputs go to datasets/<NAME>/<stage>/ (default: default)")

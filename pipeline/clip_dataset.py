@@ -33,6 +33,7 @@ Object geometry, masses, sources, provenance and per-clip presence flags go into
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -228,9 +229,8 @@ def physicalized_clips_to_episodes(clips: Sequence[PhysicalizedClip]) -> tuple[l
     """The feature spec and one episode per simulated clip (the robot features of :func:`robot_clips_to_episodes`
     with ``observation.qvel`` from the simulation, plus the simulation's actions, torques, forces and object velocities)."""
     features, episodes = robot_clips_to_episodes([c.robot for c in clips])
-    for f in features:
-        if f.name == "observation.qvel":
-            object.__setattr__(f, "description", "G1 qvel from the simulation: root linear velocity (world), root angular velocity (body), joint velocities")
+    sim_qvel = "G1 qvel from the simulation: root linear velocity (world), root angular velocity (body), joint velocities"
+    features = [replace(f, description=sim_qvel) if f.name == "observation.qvel" else f for f in features]
     features += [
         Feature("action", "float32", G1_JOINT_NAMES, "joint position targets held for the next 20 ms", "rad"),
         Feature("observation.torque", "float32", G1_JOINT_NAMES, "applied actuator torques (mean over the hold)", "N m"),

@@ -46,7 +46,7 @@ class NearestSample(NamedTuple):
     object_index: Any
 
 
-def _rotation(q, xp):
+def rotation_rows(q, xp):
     """Rows of R for wxyz quaternions q (..., 4), normalised; entries are scalars or arrays."""
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     n = xp.sqrt(w * w + x * x + y * y + z * z)
@@ -138,10 +138,10 @@ class ObjectField:
     def _chunk(self, pts, pose, xp):
         if isinstance(pose, list) or pose.ndim == 1:
             p = [float(v) for v in pose]
-            t, R = p[:3], _rotation(np.asarray(p[3:]), np)
+            t, R = p[:3], rotation_rows(np.asarray(p[3:]), np)
             R = tuple(tuple(float(v) for v in row) for row in R)
         else:
-            t, R = (pose[..., 0], pose[..., 1], pose[..., 2]), _rotation(pose[..., 3:], xp)
+            t, R = (pose[..., 0], pose[..., 1], pose[..., 2]), rotation_rows(pose[..., 3:], xp)
         X, Y, Z = pts[..., 0] - t[0], pts[..., 1] - t[1], pts[..., 2] - t[2]
         local = [R[0][j] * X + R[1][j] * Y + R[2][j] * Z for j in range(3)]
         shape = local[0].shape

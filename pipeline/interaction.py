@@ -19,22 +19,19 @@ Everything takes numpy arrays or torch tensors alike (RL environments compute th
 
 from __future__ import annotations
 
-from pipeline.array_ns import namespace
+from pipeline.array_ns import concat, namespace
+from pipeline.distance_field import rotation_rows
 
 DF_PARTS = ("phi", "grad_x", "grad_y", "grad_z", "v_norm_x", "v_norm_y", "v_norm_z", "v_tan_x", "v_tan_y", "v_tan_z")
 DEMO_PARTS = ("phi", "grad_x", "grad_y", "grad_z")
 DEMO_MAX_DISTANCE_M = 1.0
 
 
-def _cat(arrays, xp):
-    return xp.concatenate(arrays, -1) if xp.__name__ == "numpy" else xp.cat(arrays, -1)
-
-
 def interaction_features(phi, grad, vel):
     """``u = [phi, g, v_norm, v_tan]`` (..., 10) from ``phi (...)``, unit ``grad (..., 3)``, ``vel (..., 3)``."""
     xp = namespace(phi)
     v_norm = (vel * grad).sum(-1)[..., None] * grad
-    return _cat([phi[..., None], grad, v_norm, vel - v_norm], xp)
+    return concat([phi[..., None], grad, v_norm, vel - v_norm], xp, axis=-1)
 
 
 def surface_point_velocity(closest, object_index, poses, object_vel):
@@ -46,16 +43,8 @@ def surface_point_velocity(closest, object_index, poses, object_vel):
     xp = namespace(closest)
     rows = xp.arange(closest.shape[0])[:, None] + 0 * object_index
     pose, vel = poses[rows, object_index], object_vel[rows, object_index]  # (T, K, 7), (T, K, 6)
-    w, x, y, z = (pose[..., i] for i in range(3, 7))
-    n = xp.sqrt(w * w + x * x + y * y + z * z)
-    w, x, y, z = w / n, x / n, y / n, z / n
-    wb = vel[..., 3:]
-    # R w_body with R from the unit quaternion (w, x, y, z)
-    ww = xp.stack([
-        (1 - 2 * (y * y + z * z)) * wb[..., 0] + 2 * (x * y - w * z) * wb[..., 1] + 2 * (x * z + w * y) * wb[..., 2],
-        2 * (x * y + w * z) * wb[..., 0] + (1 - 2 * (x * x + z * z)) * wb[..., 1] + 2 * (y * z - w * x) * wb[..., 2],
-        2 * (x * z - w * y) * wb[..., 0] + 2 * (y * z + w * x) * wb[..., 1] + (1 - 2 * (x * x + y * y)) * wb[..., 2],
-    ], -1)  # fmt: skip
+    R, wb = rotation_rows(pose[..., 3:], xp), vel[..., 3:]
+    ww = xp.stack([R[i][0] * wb[..., 0] + R[i][1] * wb[..., 1] + R[i][2] * wb[..., 2] for i in range(3)], -1)  # R w_body
     r = closest - pose[..., :3]
     cross = xp.stack([ww[..., 1] * r[..., 2] - ww[..., 2] * r[..., 1], ww[..., 2] * r[..., 0] - ww[..., 0] * r[..., 2],
                       ww[..., 0] * r[..., 1] - ww[..., 1] * r[..., 0]], -1)  # fmt: skip
@@ -66,7 +55,7 @@ def demo_features(phi, grad, link_rot, max_distance: float = DEMO_MAX_DISTANCE_M
     """The demo's per-body ``[min(phi, max_distance), R^T g]`` (..., 4); ``link_rot (..., 3, 3)`` body-to-world."""
     xp = namespace(phi)
     local = xp.einsum("...ji,...j->...i", link_rot, grad)
-    return _cat([xp.clip(phi, None, max_distance)[..., None], local], xp)
+    return concat([xp.clip(phi, None, max_distance)[..., None], local], xp, axis=-1)
 
 
 def feature_names(links, parts=DF_PARTS) -> tuple[str, ...]:

@@ -6,6 +6,8 @@ CUDA device for CUDA tensors, on torch's current stream (so they are ordered wit
 
 from __future__ import annotations
 
+from pipeline.array_ns import is_numpy, namespace
+
 
 def warp():
     """The ``warp`` module, initialised with no greeting or per-module load lines on stdout."""
@@ -18,6 +20,6 @@ def warp():
 
 def runs_on(a) -> bool:
     """True where a warp kernel can run next to ``a``: numpy, torch CPU, torch CUDA with a CUDA driver."""
-    if type(a).__module__.split(".")[0] != "torch":
+    if is_numpy(namespace(a)):
         return True
     return a.device.type == "cpu" or (a.device.type == "cuda" and warp().is_cuda_available())
