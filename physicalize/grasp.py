@@ -68,7 +68,8 @@ import numpy as np
 
 from pipeline.foot_contact import keep_runs, runs
 from pipeline.scene import Scene, link_collision_geoms, nearest_geom_pair
-from physicalize.wbc import HAND_BODIES, Target, quat_mat
+from physicalize.target import Target
+from physicalize.wbc import HAND_BODIES, quat_mat
 
 GRAVITY = 9.81
 

@@ -20,7 +20,8 @@ from scipy.signal import savgol_filter
 
 from pipeline.clip_dataset import qvel_from_qpos
 from pipeline.foot_contact import keep_runs
-from physicalize.wbc import FOOT_BODIES, HAND_BODIES, Target, sole_corners
+from physicalize.target import Target
+from physicalize.wbc import FOOT_BODIES, HAND_BODIES, sole_corners
 
 STANCE_HEIGHT = 0.03
 STANCE_SPEED = 0.1

@@ -16,7 +16,8 @@ import mujoco
 import numpy as np
 
 if TYPE_CHECKING:
-    from physicalize.wbc import Target, WholeBodyController
+    from physicalize.target import Target
+    from physicalize.wbc import WholeBodyController
 
 
 def foot_floor_forces(m: mujoco.MjModel, d: mujoco.MjData, feet: list[int], floor: int) -> np.ndarray:

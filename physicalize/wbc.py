@@ -37,7 +37,7 @@ clipped to the joint range (the actuators clip torque, the joints have their lim
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -45,6 +45,7 @@ from qpsolvers import solve_qp
 
 from physicalize import wbc_rows
 from physicalize.stepping import Stepping
+from physicalize.target import Solution, Target
 from pipeline.robot import G1_JOINT_NAMES, NUM_JOINTS, ActuatorProfile
 from pipeline.scene import link_collision_geoms
 
@@ -103,48 +104,6 @@ class WBCConfig:
     step_max: float = 0.2  # m, largest shift
     com_anchor: float = 0.5  # the CoM target moves by this fraction of the stance feet's offset from their footsteps
     min_foot_gap: float = 0.08  # m, least lateral distance of the swing foot from the stance foot (no crossing; 0.14 moved narrow footsteps outward: frames 4557 -> 4877)
-
-
-@dataclass
-class Target:
-    """What the controller tracks at one control step (world frame; quaternions wxyz)."""
-
-    qpos: np.ndarray  # (36,) reference configuration (posture, orientations)
-    qvel: np.ndarray  # (35,)
-    qacc: np.ndarray  # (35,)
-    com: np.ndarray  # (3,) planned centre of mass
-    com_vel: np.ndarray
-    com_acc: np.ndarray
-    stance: tuple[bool, bool]  # left, right foot in support
-    foot_pos: np.ndarray  # (2, 3) foot body origins
-    foot_quat: np.ndarray  # (2, 4)
-    foot_vel: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
-    foot_acc: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
-    sole_height: np.ndarray | None = None  # (2,) the reference soles' height above the floor (for touchdown)
-    hand_pos: np.ndarray | None = None  # (2, 3), None: hands follow the posture only
-    torso_quat: np.ndarray | None = None  # (4,), None: the pelvis orientation
-    # hand task extras (physicalize.grasp); None: body origins, no feed-forward, weight w_hand
-    hand_offset: np.ndarray | None = None  # (2, 3) tracked point in each hand's body frame
-    hand_vel: np.ndarray | None = None  # (2, 3) target velocity / acceleration of that point
-    hand_acc: np.ndarray | None = None
-    hand_weight: np.ndarray | None = None  # (2,) task weight per hand
-    hand_force: np.ndarray | None = None  # (2, 3) force each hand applies to a held object (world)
-    hand_object: np.ndarray | None = None  # (2,) body id whose measured contacts with that forearm and hand hand_force replaces, -1 none
-    hand_rot: np.ndarray | None = None  # (2, 3, 3) hand orientations, tracked with weights hand_rot_weight (2,)
-    hand_rot_weight: np.ndarray | None = None
-    hand_hold_body: np.ndarray | None = None  # (2,) body id of the object each hand holds, -1 none
-    hand_hold_ref: np.ndarray | None = None  # (2, 3) that object's reference position: its lag beyond hand_lead moves the hand target along
-
-
-@dataclass
-class Solution:
-    """One control step's QP result."""
-
-    qdd: np.ndarray
-    forces: np.ndarray  # (n_corners, 3) world frame
-    tau: np.ndarray  # (29,)
-    action: np.ndarray  # (29,) joint position targets
-    ok: bool
 
 
 def sole_corners(model: mujoco.MjModel, body: str) -> np.ndarray:
