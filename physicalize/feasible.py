@@ -55,8 +55,8 @@ from physicalize.plan import plan_com
 from physicalize.reference import Reference, build_reference
 from physicalize.wbc import FOOT_BODIES, HAND_BODIES, NV_ROBOT, sole_corners
 from pipeline.foot_contact import runs
-from retarget.ik import FrameVelocityLimit
-from retarget.ik_config import SeparationLimit, joint_velocity_limits, self_collision_groups
+from pipeline.ik_limits import FrameVelocityLimit, SeparationLimit
+from retarget.ik_config import joint_velocity_limits, self_collision_groups
 
 NQ_ROBOT = 36
 

@@ -2,8 +2,8 @@
 
 Exact: the scaled mesh (per-axis scale applied to the vertices, x_scaled = diag(scale) x, so
 distances are those of the scaled surface) is a ``warp.Mesh`` (BVH over the triangles);
-``mesh_query_point_sign_normal`` gives the closest point c and the sign s from the
-angle-weighted pseudo-normal (s = -1 behind the surface). phi = |p - c|,
+``mesh_query_point_sign_winding_number`` gives the closest point c and the sign s from the
+generalized winding number w(p) (s = -1 where w > 1/2: inside). phi = |p - c|,
 
     grad = s (p - c) / phi    (inside, the outward direction), or
     grad = the triangle's normal where phi <= EPS_MESH (on the surface).
@@ -19,8 +19,11 @@ disk under :func:`pipeline.collision_mesh.cache_dir`, keyed by the file's digest
 and the tree spec (a 50k-face scan takes ~40 s to sample).
 
 One warp kernel does both, in float32, on the CPU (one thread) or on CUDA next to torch
-tensors; numpy and torch inputs get the same numbers. Real scans are rarely watertight: the
-pseudo-normal sign is local, so "inside" means behind the nearest surface.
+tensors; numpy and torch inputs get the same numbers. Real scans are rarely watertight, hence the
+winding number: on OMOMO's largebox (27.6k faces in 303 pieces, not watertight) the local
+pseudo-normal sign (warp's ``sign_normal``) put 6.4% of random points outside its bounds "inside",
+the winding number 0.02%; the pseudo-normal sign also flipped between points 5 mm apart 4x as
+often, and each flip made the octree refine there, down to its finest level.
 """
 
 from __future__ import annotations
@@ -107,7 +110,7 @@ def _kernel():
                     done = 1
         exact[i] = wp.int8(1 - done)
         if done == 0:
-            q = wp.mesh_query_point_sign_normal(mesh, p, 1.0e6)
+            q = wp.mesh_query_point_sign_winding_number(mesh, p, 1.0e6, 2.0, 0.5)
             c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
             d = p - c
             ph = wp.length(d)
@@ -187,6 +190,7 @@ class MeshShape:
         mesh = wp.Mesh(
             points=wp.array(self.vertices.astype(np.float32), dtype=wp.vec3, device=dev),
             indices=wp.array(self.faces.ravel(), dtype=wp.int32, device=dev),
+            support_winding_number=True,
         )
         t = self.cached
         if t is None:

@@ -55,7 +55,7 @@ class OctreeSpec:
     tol_grad: float | None = None  # outside the solid, |grad~ - grad| at the check points
 
     def key(self) -> str:
-        return "v2-" + "-".join(f"{k}{v:g}" for k, v in asdict(self).items() if v is not None)
+        return "v3-" + "-".join(f"{k}{v:g}" for k, v in asdict(self).items() if v is not None)
 
 
 def _trilinear(f: np.ndarray) -> np.ndarray:

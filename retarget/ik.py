@@ -12,11 +12,11 @@ over the frame tasks ``b`` (one per target body, costs from the target weights),
 an object by an unreachable target), subject to
 
 * joint limits (:class:`mink.ConfigurationLimit`);
-* a per-frame joint and root speed limit (:class:`FrameVelocityLimit`):
+* a per-frame joint and root speed limit (:class:`~pipeline.ik_limits.FrameVelocityLimit`):
   ``|q_t - q_{t-1}| <= v_max dt`` (root position: ``IKConfig.root_speed_limit`` per axis);
 * collision avoidance with the scene's own geoms: robot vs the floor plane
-  (:class:`~retarget.ik_config.FloorLimit`), robot vs every object geom and robot self-collision
-  (:class:`~retarget.ik_config.SeparationLimit`, the pairs MuJoCo's physics checks).
+  (:class:`~pipeline.ik_limits.FloorLimit`), robot vs every object geom and robot self-collision
+  (:class:`~pipeline.ik_limits.SeparationLimit`, the pairs MuJoCo's physics checks).
 
 Objects are not optimised: :func:`~retarget.ik_config.ik_model` turns each free object into a
 mocap body (same geoms), moved every frame to its pose in ``objects_pose`` (an object missing
@@ -45,16 +45,14 @@ import time
 import mink
 import mujoco
 import numpy as np
-from mink.limits.limit import Constraint
 
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.robot import default_qpos
 from pipeline.scene import Scene
+from pipeline.ik_limits import FloorLimit, FrameVelocityLimit, SeparationLimit
 from retarget.contact import ContactTask, FootClearance, contact_ramp
 from retarget.ik_config import (
     FOOT_BODIES,
-    FloorLimit,
-    SeparationLimit,
     IKConfig,
     ik_model,
     joint_velocity_limits,
@@ -64,48 +62,6 @@ from retarget.ik_config import (
     sole_offset,
 )
 from retarget.targets import IKTargets
-
-
-class FrameVelocityLimit(mink.VelocityLimit):
-    r"""Joint and root speed limit over a whole frame, however many QP steps it takes.
-
-    With ``q_0`` the configuration at the frame's start (:meth:`start_frame`) and ``dt`` the
-    frame period, each step ``dq`` at ``q`` satisfies, for every limited hinge DoF ``i``,
-
-    ``-v_i dt - (q_i - q_{0,i}) <= dq_i <= v_i dt - (q_i - q_{0,i})``
-
-    so ``|q_t - q_{t-1}| <= v dt``; with ``root_speed`` the same holds per axis for the free
-    joint's position (its linear velocity DoFs integrate into its position unrotated), so the
-    root cannot jump to satisfy what speed-limited joints could not (unlimited, a retargeted BVH
-    walk had 15 cm root jumps in one frame when a foot pin engaged). (mink's
-    :class:`~mink.VelocityLimit` bounds each step by ``v dt``, allowing ``n v dt`` in ``n`` steps.)
-    Bounds are floored at zero so ``dq = 0`` stays feasible.
-    """
-
-    def __init__(self, model: mujoco.MjModel, velocities: dict[str, float], dt: float, root_speed: float | None = None):
-        super().__init__(model, velocities=velocities)
-        self.dt = float(dt)
-        idx, qadr, limit = list(self.indices), list(model.jnt_qposadr[model.dof_jntid[self.indices]]), list(self.limit)
-        if root_speed is not None:
-            free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE and model.jnt_bodyid[j] == 1]
-            if not free:
-                raise ValueError("FrameVelocityLimit: root_speed given but the model's first body has no free joint")
-            d0, a0 = model.jnt_dofadr[free[0]], model.jnt_qposadr[free[0]]
-            idx, qadr, limit = [d0, d0 + 1, d0 + 2, *idx], [a0, a0 + 1, a0 + 2, *qadr], [root_speed] * 3 + limit
-        self._qadr, self._limit = np.array(qadr), np.array(limit, dtype=float)
-        P = np.zeros((len(idx), model.nv))
-        P[np.arange(len(idx)), idx] = 1.0
-        self._G = np.vstack([P, -P])
-        self._anchor = np.zeros(len(idx))
-
-    def start_frame(self, q: np.ndarray) -> None:
-        self._anchor = q[self._qadr].copy()
-
-    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> Constraint:
-        del dt
-        moved = configuration.q[self._qadr] - self._anchor
-        budget = self._limit * self.dt
-        return Constraint(G=self._G, h=np.maximum(np.concatenate([budget - moved, budget + moved]), 0.0))
 
 
 def _yaw_of(quat_wxyz: np.ndarray) -> float:

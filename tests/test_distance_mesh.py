@@ -161,3 +161,16 @@ def test_real_scan_exact_distance_matches_trimesh():
     dist, closest = _brute(mesh, p)
     s = field.query(p, IDENTITY)
     np.testing.assert_allclose(s.phi, dist, atol=2e-6)
+
+
+@needs_shared
+def test_real_scan_outside_is_outside():
+    """OMOMO's largebox is not watertight (303 pieces): points 5-30 cm outside its bounds must
+    still be outside (grad along p - closest). The pseudo-normal sign got 6.4% of them wrong."""
+    path = SHARED_MOCAP / "omomo" / "largebox.obj"
+    lo, hi = trimesh.load(path, force="mesh", process=False).bounds
+    field = ObjectField.from_geometry(MeshGeometry(str(path)), cache=False)
+    p = RNG.uniform(lo - 0.3, hi + 0.3, (20000, 3))
+    p = p[np.abs(np.clip(p, lo, hi) - p).max(1) > 0.05]
+    s = field.query(p, IDENTITY)
+    assert (((p - s.closest) * s.grad).sum(1) > 0).all()
