@@ -11,7 +11,9 @@ at c on the surface and inside the solid (see :mod:`pipeline.distance_primitive`
 objects: each point takes the nearest object (:class:`ObjectFields`), first object on ties.
 
 Every query runs on numpy arrays or torch tensors (CPU or CUDA), with the same math; inputs are
-processed in chunks of :data:`CHUNK` points so the working set stays in cache.
+processed in chunks of :data:`CHUNK` points so the working set stays in cache. A shape with a
+``world(points, rows, t)`` method (the scaled sphere, cylinder, capsule) does the pose in its warp
+kernel for numpy points at one pose (same math, no numpy per-point pass); it returns None to decline.
 """
 
 from __future__ import annotations
@@ -56,6 +58,13 @@ def rotation_rows(q, xp):
         (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
         (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
     )
+
+
+def _rigid(pose) -> tuple[list, tuple]:
+    """(t, rows of R) as floats for one pose (7,)."""
+    p = [float(v) for v in pose]
+    R = rotation_rows(np.asarray(p[3:]), np)
+    return p[:3], tuple(tuple(float(v) for v in row) for row in R)
 
 
 def _check(name: str, field: str, a, shape: tuple, xp) -> None:
@@ -123,6 +132,11 @@ class ObjectField:
         return self._run(points, poses[:, None, :], xp)
 
     def _run(self, points, pose, xp) -> FieldSample:
+        if xp is np and pose.ndim == 1 and hasattr(self.shape, "world"):  # pose and field fused in one kernel
+            t, R = _rigid(pose)
+            fused = self.shape.world(points, R, t)
+            if fused is not None:
+                return FieldSample(*fused)
         lead = points.shape[:-1]
         phi = xp.zeros(lead, dtype=points.dtype) if xp is np else xp.zeros(lead, dtype=points.dtype, device=points.device)
         grad, closest = 0.0 * points, 0.0 * points
@@ -137,9 +151,7 @@ class ObjectField:
 
     def _chunk(self, pts, pose, xp):
         if isinstance(pose, list) or pose.ndim == 1:
-            p = [float(v) for v in pose]
-            t, R = p[:3], rotation_rows(np.asarray(p[3:]), np)
-            R = tuple(tuple(float(v) for v in row) for row in R)
+            t, R = _rigid(pose)
         else:
             t, R = (pose[..., 0], pose[..., 1], pose[..., 2]), rotation_rows(pose[..., 3:], xp)
         X, Y, Z = pts[..., 0] - t[0], pts[..., 1] - t[1], pts[..., 2] - t[2]

@@ -5,6 +5,10 @@ Each kernel computes, per point, exactly what the numpy/torch code of
 the formulas are stated there): phi, grad and closest point, with the ellipse/ellipsoid solve of
 :mod:`pipeline.distance_ellipsoid_warp`. Inputs are coordinate columns (numpy, or torch on the
 CPU or CUDA); results come back as columns of the same kind (torch: the input's dtype).
+
+The ``*_world`` kernels also take the object pose (R, t) for numpy world points x (N, 3): per
+point p = R^T (x - t), the object-frame field, then grad = R g and closest = R c + t (as
+:class:`pipeline.distance_field.ObjectField` does in numpy), so one pose costs no numpy pass.
 """
 
 from __future__ import annotations
@@ -22,12 +26,33 @@ from pipeline.warp_runtime import warp
 EPS = wp.constant(wp.float64(1e-9))  # pipeline.distance_primitive.EPS
 
 
+vec7d = wp.types.vector(length=7, dtype=wp.float64)
+
+
 @wp.func
-def _write(out: wp.array2d(dtype=wp.float64), i: int, phi: wp.float64, g: wp.vec3d, c: wp.vec3d):
-    out[0, i] = phi
-    for k in range(3):
-        out[1 + k, i] = g[k]
-        out[4 + k, i] = c[k]
+def _pack(phi: wp.float64, g: wp.vec3d, c: wp.vec3d) -> vec7d:
+    """(phi, grad, closest) as one vector."""
+    return vec7d(phi, g[0], g[1], g[2], c[0], c[1], c[2])
+
+
+@wp.func
+def _write(out: wp.array2d(dtype=wp.float64), i: int, r: vec7d):
+    for k in range(7):
+        out[k, i] = r[k]
+
+
+@wp.func
+def _local(R: wp.mat33d, t: wp.vec3d, x: wp.vec3d) -> wp.vec3d:
+    """p = R^T (x - t): a world point in the object frame."""
+    return wp.transpose(R) * (x - t)
+
+
+@wp.func
+def _write_world(R: wp.mat33d, t: wp.vec3d, r: vec7d, i: int, phi: wp.array(dtype=wp.float64), grad: wp.array(dtype=wp.vec3d), closest: wp.array(dtype=wp.vec3d)):
+    """phi, grad = R g, closest = R c + t: an object-frame result back in the world."""
+    phi[i] = r[0]
+    grad[i] = R * wp.vec3d(r[1], r[2], r[3])
+    closest[i] = R * wp.vec3d(r[4], r[5], r[6]) + t
 
 
 @wp.func
@@ -51,27 +76,21 @@ def _section_inside(s: ell.Spec, p: wp.vec3d) -> bool:
     return ell.inside(s, p)
 
 
-@wp.kernel
-def sphere_field(e: ell.Spec, x: wp.array(dtype=wp.float64), y: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.float64), out: wp.array2d(dtype=wp.float64)):
+@wp.func
+def _sphere(e: ell.Spec, p: wp.vec3d) -> vec7d:
     """Ellipsoid: phi = |p - c|; grad = (p - c)/phi outside, the normal at c inside or on it."""
-    i = wp.tid()
-    p = wp.vec3d(x[i], y[i], z[i])
     c = ell.closest(e, p)
     d = p - c
     phi = wp.length(d)
     g = d * (wp.float64(1.0) / phi)
     if ell.inside(e, p) or phi <= EPS:
         g = ell.normal(e, c)
-    _write(out, i, phi, g, c)
+    return _pack(phi, g, c)
 
 
-@wp.kernel
-def cylinder_field(
-    sec: ell.Spec, h: wp.float64, x: wp.array(dtype=wp.float64), y: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.float64), out: wp.array2d(dtype=wp.float64)
-):
+@wp.func
+def _cylinder(sec: ell.Spec, h: wp.float64, p: wp.vec3d) -> vec7d:
     """Elliptic cylinder |z| <= h: section and axial clamp outside; inside, the nearer of side and cap."""
-    i = wp.tid()
-    p = wp.vec3d(x[i], y[i], z[i])
     pxy = wp.vec3d(p[0], p[1], wp.float64(0.0))
     q = _section_closest(sec, pxy)
     n = _section_normal(sec, pxy, q)
@@ -94,7 +113,7 @@ def cylinder_field(
             phi = wp.abs(cap)
             g = wp.vec3d(wp.float64(0.0), wp.float64(0.0), sz)
             c = wp.vec3d(c[0], c[1], sz * h)
-    _write(out, i, phi, g, c)
+    return _pack(phi, g, c)
 
 
 @wp.func
@@ -114,17 +133,8 @@ def _restricted_cap(cap: ell.Spec, pc: wp.vec3d, phi: wp.float64, c: wp.vec3d, h
     return wp.vec4d(best, bq[0], bq[1], bq[2] + h)
 
 
-@wp.kernel
-def capsule_field(
-    cap: ell.Spec,
-    sec: ell.Spec,
-    h: wp.float64,
-    restricted: int,
-    x: wp.array(dtype=wp.float64),
-    y: wp.array(dtype=wp.float64),
-    z: wp.array(dtype=wp.float64),
-    out: wp.array2d(dtype=wp.float64),
-):
+@wp.func
+def _capsule(cap: ell.Spec, sec: ell.Spec, h: wp.float64, restricted: int, p0: wp.vec3d) -> vec7d:
     """Scaled capsule, folded to w = |z|, cap ellipsoid E centred at (0, 0, h).
 
     w >= h: the closest point of E (it lies on E's upper half, which holds the capsule's nearest
@@ -132,9 +142,8 @@ def capsule_field(
     is (p - c)/phi, inside E the normal. w < h: the section's closest point at height w (the
     infinite elliptic cylinder holds the capsule); inside, the side unless (``restricted``: E's z
     semi-axis below the section's largest) a normal point of E's upper half is nearer."""
-    i = wp.tid()
-    sz = ell.sign(z[i])
-    p = wp.vec3d(x[i], y[i], wp.abs(z[i]))
+    sz = ell.sign(p0[2])
+    p = wp.vec3d(p0[0], p0[1], wp.abs(p0[2]))
     w = p[2]
     phi = wp.float64(0.0)
     g = wp.vec3d()
@@ -165,7 +174,46 @@ def capsule_field(
                     g = ell.normal(cap, wp.vec3d(r[1], r[2], r[3] - h))
                 phi = r[0]
                 c = wp.vec3d(r[1], r[2], r[3])
-    _write(out, i, phi, wp.vec3d(g[0], g[1], sz * g[2]), wp.vec3d(c[0], c[1], sz * c[2]))
+    return _pack(phi, wp.vec3d(g[0], g[1], sz * g[2]), wp.vec3d(c[0], c[1], sz * c[2]))
+
+_F64 = wp.array(dtype=wp.float64)
+_V3 = wp.array(dtype=wp.vec3d)
+
+
+@wp.kernel
+def sphere_field(e: ell.Spec, x: _F64, y: _F64, z: _F64, out: wp.array2d(dtype=wp.float64)):
+    i = wp.tid()
+    _write(out, i, _sphere(e, wp.vec3d(x[i], y[i], z[i])))
+
+
+@wp.kernel
+def cylinder_field(sec: ell.Spec, h: wp.float64, x: _F64, y: _F64, z: _F64, out: wp.array2d(dtype=wp.float64)):
+    i = wp.tid()
+    _write(out, i, _cylinder(sec, h, wp.vec3d(x[i], y[i], z[i])))
+
+
+@wp.kernel
+def capsule_field(cap: ell.Spec, sec: ell.Spec, h: wp.float64, restricted: int, x: _F64, y: _F64, z: _F64, out: wp.array2d(dtype=wp.float64)):
+    i = wp.tid()
+    _write(out, i, _capsule(cap, sec, h, restricted, wp.vec3d(x[i], y[i], z[i])))
+
+
+@wp.kernel
+def sphere_world(e: ell.Spec, R: wp.mat33d, t: wp.vec3d, x: _V3, phi: _F64, grad: _V3, closest: _V3):
+    i = wp.tid()
+    _write_world(R, t, _sphere(e, _local(R, t, x[i])), i, phi, grad, closest)
+
+
+@wp.kernel
+def cylinder_world(sec: ell.Spec, h: wp.float64, R: wp.mat33d, t: wp.vec3d, x: _V3, phi: _F64, grad: _V3, closest: _V3):
+    i = wp.tid()
+    _write_world(R, t, _cylinder(sec, h, _local(R, t, x[i])), i, phi, grad, closest)
+
+
+@wp.kernel
+def capsule_world(cap: ell.Spec, sec: ell.Spec, h: wp.float64, restricted: int, R: wp.mat33d, t: wp.vec3d, x: _V3, phi: _F64, grad: _V3, closest: _V3):
+    i = wp.tid()
+    _write_world(R, t, _capsule(cap, sec, h, restricted, _local(R, t, x[i])), i, phi, grad, closest)
 
 
 @lru_cache(maxsize=64)
@@ -193,6 +241,19 @@ def _launch(kernel, args: list, x, y, z, xp):
     return out[0], (out[1], out[2], out[3]), (out[4], out[5], out[6])
 
 
+def _launch_world(kernel, args: list, points: np.ndarray, rows, t):
+    """Run ``kernel(*args, R, t, points, phi, grad, closest)`` on the CPU for numpy world ``points`` (N, 3)."""
+    wp = warp()
+    n = len(points)
+    phi, grad, closest = np.empty(n), np.empty((n, 3)), np.empty((n, 3))
+    if n:
+        pts = np.ascontiguousarray(points, dtype=np.float64)
+        pose = [wp.mat33d(*[float(v) for row in rows for v in row]), wp.vec3d(*[float(v) for v in t])]
+        arrays = [wp.array(a, dtype=d, copy=False, device="cpu") for a, d in ((pts, wp.vec3d), (phi, wp.float64), (grad, wp.vec3d), (closest, wp.vec3d))]
+        wp.launch(kernel, dim=n, inputs=[*args, *pose, arrays[0]], outputs=arrays[1:], device="cpu")
+    return phi, grad, closest
+
+
 def sphere(radii: tuple[float, float, float], x, y, z, xp):
     """The field of the ellipsoid with semi-axes ``radii``."""
     return _launch(sphere_field, [_spec(radii)], x, y, z, xp)
@@ -207,3 +268,19 @@ def capsule(radii: tuple[float, float, float], half_length: float, x, y, z, xp):
     """The field of the capsule along z: segment [-half_length, half_length], ball semi-axes ``radii``."""
     restricted = int(radii[2] < max(radii[:2]))
     return _launch(capsule_field, [_spec(radii), _spec(radii[:2]), wp.float64(half_length), restricted], x, y, z, xp)
+
+
+def sphere_world_field(radii: tuple[float, float, float], points: np.ndarray, rows, t):
+    """:func:`sphere` at numpy world ``points`` (N, 3) for the pose (R by ``rows``, t): (phi, grad, closest) world arrays."""
+    return _launch_world(sphere_world, [_spec(radii)], points, rows, t)
+
+
+def cylinder_world_field(radii: tuple[float, float], half_length: float, points: np.ndarray, rows, t):
+    """:func:`cylinder` at numpy world ``points`` for the pose (R by ``rows``, t)."""
+    return _launch_world(cylinder_world, [_spec(radii), wp.float64(half_length)], points, rows, t)
+
+
+def capsule_world_field(radii: tuple[float, float, float], half_length: float, points: np.ndarray, rows, t):
+    """:func:`capsule` at numpy world ``points`` for the pose (R by ``rows``, t)."""
+    restricted = int(radii[2] < max(radii[:2]))
+    return _launch_world(capsule_world, [_spec(radii), _spec(radii[:2]), wp.float64(half_length), restricted], points, rows, t)

@@ -72,3 +72,23 @@ def test_torch_cpu_tensors_take_the_kernel_and_keep_their_dtype(dtype):
 def test_no_points():
     phi, g, c = primitive_shape(SCALED[0]).local(np.zeros(0), np.zeros(0), np.zeros(0), np)
     assert phi.shape == (0,) and g[0].shape == (0,) and c[0].shape == (0,)
+
+
+@pytest.mark.parametrize("prim", SCALED, ids=lambda p: f"{p.kind}{p.scale}")
+def test_pose_fused_kernel_equals_the_numpy_pose_transform(prim):
+    """One numpy pose runs the pose in the kernel; a per-point pose (N, 7) transforms in numpy."""
+    from pipeline.distance_field import ObjectField
+
+    field = ObjectField.from_geometry(prim)
+    rng = np.random.default_rng(11)
+    local = _points(field.shape, 2000)
+    for _ in range(4):
+        pose = np.r_[rng.uniform(-2, 2, 3), rng.normal(size=4) * rng.uniform(0.2, 3.0)]  # quaternion not normalised
+        world = local * rng.uniform(0.5, 1.5) + rng.uniform(-2, 2, 3)
+        fused = field.query(world, pose)
+        ref = field.query(world, np.tile(pose, (len(world), 1)))
+        assert fused.grad.shape == ref.grad.shape == (len(world), 3) and fused.phi.shape == (len(world),)
+        for a, b in zip(fused, ref):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
+    empty = field.query(np.zeros((0, 3)), pose)
+    assert empty.phi.shape == (0,) and empty.closest.shape == (0, 3)
