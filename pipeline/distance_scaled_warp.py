@@ -254,6 +254,15 @@ def _launch_world(kernel, args: list, points: np.ndarray, rows, t):
     return phi, grad, closest
 
 
+def _cylinder_args(radii: tuple[float, float], half_length: float) -> list:
+    return [_spec(radii), wp.float64(half_length)]
+
+
+def _capsule_args(radii: tuple[float, float, float], half_length: float) -> list:
+    """Cap ellipsoid, section ellipse, half-length, and ``restricted`` (E's z semi-axis below the section's largest)."""
+    return [_spec(radii), _spec(radii[:2]), wp.float64(half_length), int(radii[2] < max(radii[:2]))]
+
+
 def sphere(radii: tuple[float, float, float], x, y, z, xp):
     """The field of the ellipsoid with semi-axes ``radii``."""
     return _launch(sphere_field, [_spec(radii)], x, y, z, xp)
@@ -261,13 +270,12 @@ def sphere(radii: tuple[float, float, float], x, y, z, xp):
 
 def cylinder(radii: tuple[float, float], half_length: float, x, y, z, xp):
     """The field of the cylinder along z with section radii ``radii`` and half-length ``half_length``."""
-    return _launch(cylinder_field, [_spec(radii), wp.float64(half_length)], x, y, z, xp)
+    return _launch(cylinder_field, _cylinder_args(radii, half_length), x, y, z, xp)
 
 
 def capsule(radii: tuple[float, float, float], half_length: float, x, y, z, xp):
     """The field of the capsule along z: segment [-half_length, half_length], ball semi-axes ``radii``."""
-    restricted = int(radii[2] < max(radii[:2]))
-    return _launch(capsule_field, [_spec(radii), _spec(radii[:2]), wp.float64(half_length), restricted], x, y, z, xp)
+    return _launch(capsule_field, _capsule_args(radii, half_length), x, y, z, xp)
 
 
 def sphere_world_field(radii: tuple[float, float, float], points: np.ndarray, rows, t):
@@ -277,10 +285,9 @@ def sphere_world_field(radii: tuple[float, float, float], points: np.ndarray, ro
 
 def cylinder_world_field(radii: tuple[float, float], half_length: float, points: np.ndarray, rows, t):
     """:func:`cylinder` at numpy world ``points`` for the pose (R by ``rows``, t)."""
-    return _launch_world(cylinder_world, [_spec(radii), wp.float64(half_length)], points, rows, t)
+    return _launch_world(cylinder_world, _cylinder_args(radii, half_length), points, rows, t)
 
 
 def capsule_world_field(radii: tuple[float, float, float], half_length: float, points: np.ndarray, rows, t):
     """:func:`capsule` at numpy world ``points`` for the pose (R by ``rows``, t)."""
-    restricted = int(radii[2] < max(radii[:2]))
-    return _launch_world(capsule_world, [_spec(radii), _spec(radii[:2]), wp.float64(half_length), restricted], points, rows, t)
+    return _launch_world(capsule_world, _capsule_args(radii, half_length), points, rows, t)

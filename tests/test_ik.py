@@ -6,15 +6,14 @@ Targets are world poses of 14 G1 bodies along a known G1 motion (bench/bench_ik.
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import mink
 import mujoco
 import numpy as np
 import pytest
 
+import bench_scripts
 from pipeline.errors import InputError
 from pipeline.geometry import Primitive
 from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES, default_qpos, joint_limits
@@ -23,9 +22,7 @@ from retarget.ik import G1Retargeter, solve_sequence, targets_from_qpos
 from retarget.ik_config import IKConfig, ik_model, joint_velocity_limits, sole_offset
 from retarget.targets import IKTargets
 
-_spec = importlib.util.spec_from_file_location("bench_ik", Path(__file__).resolve().parents[1] / "bench" / "bench_ik.py")
-bench_ik = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bench_ik)
+bench_ik = bench_scripts.load("bench_ik")
 
 FPS = 30.0
 FRAMES = 120

@@ -3,23 +3,20 @@ penetrations are pushed out, MuJoCo's pair filtering, whole-frame speed budgets.
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import mink
 import mujoco
 import numpy as np
 import pytest
 
+import bench_scripts
 from pipeline.ik_limits import FloorLimit, FrameVelocityLimit, SeparationLimit, pairs_kept_apart_by_joint_limits
 from pipeline.robot import G1_JOINT_NAMES
 from pipeline.scene import build_scene
 from retarget.ik_config import ik_model
 
-_spec = importlib.util.spec_from_file_location("bench_ik", Path(__file__).resolve().parents[1] / "bench" / "bench_ik.py")
-bench_ik = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bench_ik)
+bench_ik = bench_scripts.load("bench_ik")
 
 
 @pytest.fixture(scope="module")
