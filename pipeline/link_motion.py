@@ -11,7 +11,6 @@ paper's DF features, exact for the simulated state (no finite differences).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import mujoco
 import numpy as np
@@ -30,11 +29,10 @@ class LinkMotion:
     vel: np.ndarray
 
 
-@lru_cache(maxsize=1)
 def robot_model() -> mujoco.MjModel:
-    from pipeline.robot import g1_xml_path
+    from pipeline.robot import g1_model
 
-    return mujoco.MjModel.from_xml_path(str(g1_xml_path()))
+    return g1_model()
 
 
 def body_ids(model: mujoco.MjModel, links: tuple[str, ...] | list[str], source: str | None = None) -> list[int]:

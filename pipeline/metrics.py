@@ -52,7 +52,7 @@ Definitions (``T`` frames at ``fps``; every ``*_frac*`` is a count of frames div
 ``frames_per_s`` = ``frames / seconds_wall``.
 
 Cost: the compiled scene is cached per object set; one pass over a 325-frame clip with a mesh
-box takes ~40-60 ms. (The first G1 compile in a process costs ~3 s: MuJoCo's mesh processing.)
+box takes ~40-60 ms. (The G1 compiles without its visual meshes, :func:`pipeline.robot.g1_spec`.)
 """
 
 from __future__ import annotations

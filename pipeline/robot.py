@@ -29,6 +29,7 @@ from __future__ import annotations
 import importlib.util
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -179,11 +180,35 @@ def actuator_profile(name: str) -> ActuatorProfile:
         raise ValueError(f"unknown actuator profile {name!r}; known: {sorted(ACTUATOR_PROFILES)}") from None
 
 
-def joint_limits() -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) joint position limits [rad] in :data:`G1_JOINT_NAMES` order, read from g1.xml."""
+def g1_spec():
+    """``g1.xml`` as an editable ``mujoco.MjSpec`` without its visual meshes.
+
+    The meshes are visual only (geoms with ``contype = conaffinity = 0``; every body declares its
+    mass and inertia), so dropping them leaves the physics as it was, while compiling no longer
+    processes ~197k mesh vertices: 1.4 ms instead of ~0.8 s per compile (and ~3 s for the first in
+    a process). The stages simulate, solve IK and draw the robot from its collision primitives."""
     import mujoco
 
-    m = mujoco.MjModel.from_xml_path(str(g1_xml_path()))
+    spec = mujoco.MjSpec.from_file(str(g1_xml_path()))
+    for g in list(spec.geoms):
+        if g.type == mujoco.mjtGeom.mjGEOM_MESH and g.contype == 0 and g.conaffinity == 0:
+            spec.delete(g)
+    used = {g.meshname for g in spec.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH}
+    for mesh in list(spec.meshes):
+        if mesh.name not in used:
+            spec.delete(mesh)
+    return spec
+
+
+@lru_cache(maxsize=1)
+def g1_model():
+    """The compiled :func:`g1_spec` (no actuators, no floor: kinematics and dynamics of the robot alone)."""
+    return g1_spec().compile()
+
+
+def joint_limits() -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) joint position limits [rad] in :data:`G1_JOINT_NAMES` order, read from g1.xml."""
+    m = g1_model()
     rng = np.array([m.jnt_range[m.joint(j).id] for j in G1_JOINT_NAMES])
     return rng[:, 0].copy(), rng[:, 1].copy()
 

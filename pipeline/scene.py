@@ -38,7 +38,7 @@ import trimesh
 
 from pipeline.collision_mesh import collision_parts, load_mesh
 from pipeline.geometry import Chair, MeshGeometry, ObjectGeometry, ObjectPhysics, Primitive
-from pipeline.robot import G1_JOINT_NAMES, ActuatorProfile, actuator_profile, g1_xml_path
+from pipeline.robot import G1_JOINT_NAMES, ActuatorProfile, actuator_profile, g1_spec
 
 PHYSICS_TIMESTEP = 0.005
 IMPRATIO = 10.0
@@ -191,7 +191,7 @@ def build_spec(objects: tuple[SceneObject, ...] | list[SceneObject] = (), profil
     names = [o.name for o in objects]
     if len(set(names)) != len(names):
         raise ValueError(f"object names must be unique, got {names}")
-    spec = mujoco.MjSpec.from_file(str(g1_xml_path()))
+    spec = g1_spec()
     spec.option.timestep = PHYSICS_TIMESTEP
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.option.cone, spec.option.impratio = mujoco.mjtCone.mjCONE_ELLIPTIC, IMPRATIO

@@ -132,9 +132,9 @@ def g1_rest() -> G1Rest:
     """Forward kinematics of ``g1.xml`` at ``q = 0`` (identity root), shifted so the soles touch ``z = 0``."""
     import mujoco
 
-    from pipeline.robot import g1_xml_path
+    from pipeline.robot import g1_model
 
-    model = mujoco.MjModel.from_xml_path(str(g1_xml_path()))
+    model = g1_model()
     mujoco.mj_forward(model, data := mujoco.MjData(model))
     collide = [g for g in range(model.ngeom) if model.geom_contype[g] or model.geom_conaffinity[g]]
     feet = {model.body(f"{s}_ankle_roll_link").id for s in SIDES}

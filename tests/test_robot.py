@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from pipeline.robot import (
-    ACTUATOR_PROFILES, G1_JOINT_NAMES, LESSMIMIC_DEMO_DF_BODIES, G1_LINK_NAMES, actuator_profile, g1_xml_path, joint_limits,
+    ACTUATOR_PROFILES, G1_JOINT_NAMES, LESSMIMIC_DEMO_DF_BODIES, G1_LINK_NAMES, actuator_profile, g1_model, g1_xml_path, joint_limits,
 )  # fmt: skip
 
 
@@ -13,6 +13,27 @@ def test_joint_order_is_the_mjlab_xml_order():
     m = mujoco.MjModel.from_xml_path(str(g1_xml_path()))
     assert (m.nq, m.nv) == (36, 35)
     assert tuple(m.joint(i).name for i in range(1, m.njnt)) == G1_JOINT_NAMES
+
+
+def test_physics_model_without_visual_meshes_has_the_xml_physics():
+    full, lean = mujoco.MjModel.from_xml_path(str(g1_xml_path())), g1_model()
+    assert lean.nmesh == 0 and full.nmesh > 0
+    for field in ("body_mass", "body_inertia", "body_ipos", "body_iquat", "body_pos", "body_quat", "jnt_range", "dof_armature", "dof_damping"):
+        np.testing.assert_array_equal(getattr(lean, field), getattr(full, field), err_msg=field)
+
+    def collision(m):
+        return [(m.geom(g).name, m.geom_bodyid[g], m.geom_type[g], *m.geom_size[g], *m.geom_pos[g], *m.geom_quat[g], *m.geom_friction[g])
+                for g in range(m.ngeom) if m.geom_contype[g] or m.geom_conaffinity[g]]  # fmt: skip
+
+    assert collision(lean) == collision(full) and len(collision(lean)) > 20
+    # the same contacts and dynamics at a crouched, tilted pose
+    dl, df = mujoco.MjData(lean), mujoco.MjData(full)
+    q = np.r_[0.1, 0.0, 0.55, 0.96, 0.1, 0.2, 0.0, np.random.default_rng(0).uniform(-0.3, 0.3, 29)]
+    for m, d in ((lean, dl), (full, df)):
+        d.qpos[:] = q / np.r_[1, 1, 1, np.linalg.norm(q[3:7]) * np.ones(4), np.ones(29)]
+        mujoco.mj_forward(m, d)
+    assert dl.ncon == df.ncon
+    np.testing.assert_array_equal(dl.qacc, df.qacc)
 
 
 def test_named_links_exist():
