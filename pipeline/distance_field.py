@@ -12,8 +12,9 @@ objects: each point takes the nearest object (:class:`ObjectFields`), first obje
 
 Every query runs on numpy arrays or torch tensors (CPU or CUDA), with the same math; inputs are
 processed in chunks of :data:`CHUNK` points so the working set stays in cache. A shape with a
-``world(points, rows, t)`` method (the scaled sphere, cylinder, capsule) does the pose in its warp
-kernel for numpy points at one pose (same math, no numpy per-point pass); it returns None to decline.
+``world(points, R, t)`` method (the scaled sphere, cylinder, capsule) does the pose in its warp
+kernel for numpy points at one pose or at one pose per frame (:meth:`ObjectField.query_links`):
+same math, no numpy per-point pass; it returns None to decline. Per-point poses take the numpy pass.
 """
 
 from __future__ import annotations
@@ -132,11 +133,11 @@ class ObjectField:
         return self._run(points, poses[:, None, :], xp)
 
     def _run(self, points, pose, xp) -> FieldSample:
-        if xp is np and pose.ndim == 1 and hasattr(self.shape, "world"):  # pose and field fused in one kernel
-            t, R = _rigid(pose)
-            fused = self.shape.world(points, R, t)
+        """``pose`` (7,) for all points, (N, 7) per point, or (T, 1, 7) per frame of ``points`` (T, K, 3)."""
+        if xp is np and pose.ndim != 2 and hasattr(self.shape, "world"):  # pose and field fused in one kernel
+            fused = self._fused(points, pose.reshape(-1, 7))
             if fused is not None:
-                return FieldSample(*fused)
+                return fused
         lead = points.shape[:-1]
         phi = xp.zeros(lead, dtype=points.dtype) if xp is np else xp.zeros(lead, dtype=points.dtype, device=points.device)
         grad, closest = 0.0 * points, 0.0 * points
@@ -148,6 +149,15 @@ class ObjectField:
             pz = pose if isinstance(pose, list) or pose.ndim == 1 else pose[sl]
             phi[sl], grad[sl], closest[sl] = self._chunk(points[sl], pz, xp)
         return FieldSample(phi, grad, closest)
+
+    def _fused(self, points, poses) -> FieldSample | None:
+        """The shape's warp kernel for numpy ``points`` (T, K, 3) or (N, 3) at ``poses`` (T, 7), or None."""
+        R = np.stack([np.stack(row, -1) for row in rotation_rows(poses[:, 3:], np)], -2)
+        out = self.shape.world(points.reshape(-1, 3), R, poses[:, :3])
+        if out is None:
+            return None
+        lead = points.shape[:-1]
+        return FieldSample(out[0].reshape(lead), out[1].reshape(*lead, 3), out[2].reshape(*lead, 3))
 
     def _chunk(self, pts, pose, xp):
         if isinstance(pose, list) or pose.ndim == 1:

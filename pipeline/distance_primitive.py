@@ -132,13 +132,14 @@ class SphereShape:
             return distance_scaled_warp.sphere(self.radii, x, y, z, xp)
         return self.local_xp(x, y, z, xp)
 
-    def world(self, points, rows, t):
-        """The field at numpy world ``points`` (N, 3), pose R (``rows``), t, in one warp kernel; None (round) where not fused."""
+    def world(self, points, R, t):
+        """The field at numpy world ``points`` (N, 3) for poses ``R`` (T, 3, 3), ``t`` (T, 3), point i at pose
+        i // (N / T), in one warp kernel; None (round) where not fused."""
         if _isotropic(self.radii):
             return None
         from pipeline import distance_scaled_warp
 
-        return distance_scaled_warp.sphere_world_field(self.radii, points, rows, t)
+        return distance_scaled_warp.sphere_world_field(self.radii, points, R, t)
 
     def local_xp(self, x, y, z, xp):
         """The ellipsoid's field in numpy/torch (where warp cannot run; the kernel's reference)."""
@@ -166,13 +167,13 @@ class CylinderShape:
             return distance_scaled_warp.cylinder(self.radii, self.half_length, x, y, z, xp)
         return self.local_xp(x, y, z, xp)
 
-    def world(self, points, rows, t):
+    def world(self, points, R, t):
         """As :meth:`SphereShape.world` (fused for an elliptic section only)."""
         if _isotropic(self.radii):
             return None
         from pipeline import distance_scaled_warp
 
-        return distance_scaled_warp.cylinder_world_field(self.radii, self.half_length, points, rows, t)
+        return distance_scaled_warp.cylinder_world_field(self.radii, self.half_length, points, R, t)
 
     def local_xp(self, x, y, z, xp):
         """The field in numpy/torch (a circular section, or where warp cannot run; the kernel's reference)."""
@@ -214,13 +215,13 @@ class CapsuleShape:
             return distance_scaled_warp.capsule(self.radii, self.half_length, x, y, z, xp)
         return self.local_xp(x, y, z, xp)
 
-    def world(self, points, rows, t):
+    def world(self, points, R, t):
         """As :meth:`SphereShape.world` (fused for a scaled capsule only)."""
         if _isotropic(self.radii):
             return None
         from pipeline import distance_scaled_warp
 
-        return distance_scaled_warp.capsule_world_field(self.radii, self.half_length, points, rows, t)
+        return distance_scaled_warp.capsule_world_field(self.radii, self.half_length, points, R, t)
 
     def local_xp(self, x, y, z, xp):
         """The scaled capsule's field in numpy/torch (where warp cannot run; the kernel's reference)."""

@@ -6,9 +6,12 @@ the formulas are stated there): phi, grad and closest point, with the ellipse/el
 :mod:`pipeline.distance_ellipsoid_warp`. Inputs are coordinate columns (numpy, or torch on the
 CPU or CUDA); results come back as columns of the same kind (torch: the input's dtype).
 
-The ``*_world`` kernels also take the object pose (R, t) for numpy world points x (N, 3): per
-point p = R^T (x - t), the object-frame field, then grad = R g and closest = R c + t (as
-:class:`pipeline.distance_field.ObjectField` does in numpy), so one pose costs no numpy pass.
+The ``*_world`` kernels also take the object poses (R_j, t_j), j < T, for numpy world points
+x (N, 3), N = T K, point i at pose j = i // K (one pose: T = 1; one per frame: K links a frame):
+per point p = R_j^T (x - t_j), the object-frame field, then grad = R_j g and closest = R_j c + t_j
+(as :class:`pipeline.distance_field.ObjectField` does in numpy), so the poses cost no numpy pass
+over the points. They run on the CPU (numpy points), one thread per pose looping over its K points:
+the pose is loaded once and no point pays an index division.
 """
 
 from __future__ import annotations
@@ -178,6 +181,7 @@ def _capsule(cap: ell.Spec, sec: ell.Spec, h: wp.float64, restricted: int, p0: w
 
 _F64 = wp.array(dtype=wp.float64)
 _V3 = wp.array(dtype=wp.vec3d)
+_M33 = wp.array(dtype=wp.mat33d)
 
 
 @wp.kernel
@@ -199,21 +203,30 @@ def capsule_field(cap: ell.Spec, sec: ell.Spec, h: wp.float64, restricted: int, 
 
 
 @wp.kernel
-def sphere_world(e: ell.Spec, R: wp.mat33d, t: wp.vec3d, x: _V3, phi: _F64, grad: _V3, closest: _V3):
-    i = wp.tid()
-    _write_world(R, t, _sphere(e, _local(R, t, x[i])), i, phi, grad, closest)
+def sphere_world(e: ell.Spec, R: _M33, t: _V3, k: int, x: _V3, phi: _F64, grad: _V3, closest: _V3):
+    j = wp.tid()
+    Rj = R[j]
+    tj = t[j]
+    for i in range(j * k, j * k + k):
+        _write_world(Rj, tj, _sphere(e, _local(Rj, tj, x[i])), i, phi, grad, closest)
 
 
 @wp.kernel
-def cylinder_world(sec: ell.Spec, h: wp.float64, R: wp.mat33d, t: wp.vec3d, x: _V3, phi: _F64, grad: _V3, closest: _V3):
-    i = wp.tid()
-    _write_world(R, t, _cylinder(sec, h, _local(R, t, x[i])), i, phi, grad, closest)
+def cylinder_world(sec: ell.Spec, h: wp.float64, R: _M33, t: _V3, k: int, x: _V3, phi: _F64, grad: _V3, closest: _V3):
+    j = wp.tid()
+    Rj = R[j]
+    tj = t[j]
+    for i in range(j * k, j * k + k):
+        _write_world(Rj, tj, _cylinder(sec, h, _local(Rj, tj, x[i])), i, phi, grad, closest)
 
 
 @wp.kernel
-def capsule_world(cap: ell.Spec, sec: ell.Spec, h: wp.float64, restricted: int, R: wp.mat33d, t: wp.vec3d, x: _V3, phi: _F64, grad: _V3, closest: _V3):
-    i = wp.tid()
-    _write_world(R, t, _capsule(cap, sec, h, restricted, _local(R, t, x[i])), i, phi, grad, closest)
+def capsule_world(cap: ell.Spec, sec: ell.Spec, h: wp.float64, restricted: int, R: _M33, t: _V3, k: int, x: _V3, phi: _F64, grad: _V3, closest: _V3):
+    j = wp.tid()
+    Rj = R[j]
+    tj = t[j]
+    for i in range(j * k, j * k + k):
+        _write_world(Rj, tj, _capsule(cap, sec, h, restricted, _local(Rj, tj, x[i])), i, phi, grad, closest)
 
 
 @lru_cache(maxsize=64)
@@ -241,16 +254,18 @@ def _launch(kernel, args: list, x, y, z, xp):
     return out[0], (out[1], out[2], out[3]), (out[4], out[5], out[6])
 
 
-def _launch_world(kernel, args: list, points: np.ndarray, rows, t):
-    """Run ``kernel(*args, R, t, points, phi, grad, closest)`` on the CPU for numpy world ``points`` (N, 3)."""
+def _launch_world(kernel, args: list, points: np.ndarray, R: np.ndarray, t: np.ndarray):
+    """Run ``kernel(*args, R, t, K, points, phi, grad, closest)`` on the CPU for numpy world ``points`` (N, 3)
+    at poses ``R`` (T, 3, 3), ``t`` (T, 3), N = T K: point i at pose i // K (one thread per pose)."""
     wp = warp()
-    n = len(points)
+    n, poses = len(points), len(R)
+    if n % max(poses, 1):
+        raise ValueError(f"{n} points do not split into {poses} poses")
     phi, grad, closest = np.empty(n), np.empty((n, 3)), np.empty((n, 3))
     if n:
-        pts = np.ascontiguousarray(points, dtype=np.float64)
-        pose = [wp.mat33d(*[float(v) for row in rows for v in row]), wp.vec3d(*[float(v) for v in t])]
-        arrays = [wp.array(a, dtype=d, copy=False, device="cpu") for a, d in ((pts, wp.vec3d), (phi, wp.float64), (grad, wp.vec3d), (closest, wp.vec3d))]
-        wp.launch(kernel, dim=n, inputs=[*args, *pose, arrays[0]], outputs=arrays[1:], device="cpu")
+        cols = [(R, wp.mat33d), (t, wp.vec3d), (points, wp.vec3d), (phi, wp.float64), (grad, wp.vec3d), (closest, wp.vec3d)]
+        R, t, pts, *outs = [wp.array(np.ascontiguousarray(a, dtype=np.float64), dtype=d, copy=False, device="cpu") for a, d in cols]
+        wp.launch(kernel, dim=poses, inputs=[*args, R, t, n // poses, pts], outputs=outs, device="cpu")
     return phi, grad, closest
 
 
@@ -278,16 +293,17 @@ def capsule(radii: tuple[float, float, float], half_length: float, x, y, z, xp):
     return _launch(capsule_field, _capsule_args(radii, half_length), x, y, z, xp)
 
 
-def sphere_world_field(radii: tuple[float, float, float], points: np.ndarray, rows, t):
-    """:func:`sphere` at numpy world ``points`` (N, 3) for the pose (R by ``rows``, t): (phi, grad, closest) world arrays."""
-    return _launch_world(sphere_world, [_spec(radii)], points, rows, t)
+def sphere_world_field(radii: tuple[float, float, float], points: np.ndarray, R: np.ndarray, t: np.ndarray):
+    """:func:`sphere` at numpy world ``points`` (N, 3) for poses ``R`` (T, 3, 3), ``t`` (T, 3), point i at pose
+    i // (N / T): (phi, grad, closest) world arrays."""
+    return _launch_world(sphere_world, [_spec(radii)], points, R, t)
 
 
-def cylinder_world_field(radii: tuple[float, float], half_length: float, points: np.ndarray, rows, t):
-    """:func:`cylinder` at numpy world ``points`` for the pose (R by ``rows``, t)."""
-    return _launch_world(cylinder_world, _cylinder_args(radii, half_length), points, rows, t)
+def cylinder_world_field(radii: tuple[float, float], half_length: float, points: np.ndarray, R: np.ndarray, t: np.ndarray):
+    """:func:`cylinder` at numpy world ``points`` for poses (R, t), as :func:`sphere_world_field`."""
+    return _launch_world(cylinder_world, _cylinder_args(radii, half_length), points, R, t)
 
 
-def capsule_world_field(radii: tuple[float, float, float], half_length: float, points: np.ndarray, rows, t):
-    """:func:`capsule` at numpy world ``points`` for the pose (R by ``rows``, t)."""
-    return _launch_world(capsule_world, _capsule_args(radii, half_length), points, rows, t)
+def capsule_world_field(radii: tuple[float, float, float], half_length: float, points: np.ndarray, R: np.ndarray, t: np.ndarray):
+    """:func:`capsule` at numpy world ``points`` for poses (R, t), as :func:`sphere_world_field`."""
+    return _launch_world(capsule_world, _capsule_args(radii, half_length), points, R, t)

@@ -3,6 +3,8 @@ octree field against the exact one, numpy == torch, the disk cache, and bad mesh
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 import torch
@@ -10,10 +12,11 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from pipeline.distance_field import ObjectField
-from pipeline.distance_mesh import MeshShape
+from pipeline.distance_mesh import BOX_MARGIN, MeshShape
 from pipeline.distance_octree import OctreeSpec
 from pipeline.errors import InputError
 from pipeline.geometry import MeshGeometry
+from pipeline.warp_runtime import warp
 from mocap_paths import SHARED_MOCAP, needs_shared
 
 RNG = np.random.default_rng(5)
@@ -50,6 +53,69 @@ def _inside(mesh: trimesh.Trimesh, p: np.ndarray) -> np.ndarray:
     num = (a * np.cross(b, c)).sum(-1)
     den = la * lb * lc + (a * b).sum(-1) * lc + (a * c).sum(-1) * lb + (b * c).sum(-1) * la
     return np.arctan2(num, den).sum(1) / (2 * np.pi) > 0.5
+
+
+@functools.cache
+def _winding_kernel():
+    wp = warp()
+
+    @wp.kernel
+    def winding_everywhere(mesh: wp.uint64, points: wp.array(dtype=wp.vec3), phi: wp.array(dtype=float), grad: wp.array(dtype=wp.vec3), closest: wp.array(dtype=wp.vec3)):
+        i = wp.tid()
+        p = points[i]
+        q = wp.mesh_query_point_sign_winding_number(mesh, p, 1.0e6, 2.0, 0.5)
+        c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+        phi[i] = wp.length(p - c)
+        closest[i] = c
+        grad[i] = wp.where(phi[i] <= 1.0e-6, wp.mesh_eval_face_normal(mesh, q.face), (p - c) * (q.sign / phi[i]))
+
+    return winding_everywhere
+
+
+def _winding_everywhere(shape: MeshShape, p: np.ndarray):
+    """The exact field with the winding-number sign at every point (no bounds test): phi, grad, closest."""
+    wp = warp()
+    mesh = wp.Mesh(wp.array(shape.vertices.astype(np.float32), dtype=wp.vec3), wp.array(shape.faces.ravel(), dtype=wp.int32), support_winding_number=True)
+    out = [np.empty(len(p), np.float32), np.empty((len(p), 3), np.float32), np.empty((len(p), 3), np.float32)]
+    arrays = [wp.array(a, dtype=t, copy=False, device="cpu") for a, t in zip(out, [wp.float32, wp.vec3, wp.vec3])]
+    pts = wp.array(p.astype(np.float32), dtype=wp.vec3, device="cpu")
+    wp.launch(_winding_kernel(), dim=len(p), inputs=[mesh.id, pts], outputs=arrays, device="cpu")
+    return out
+
+
+def _bounds_probe(mesh: trimesh.Trimesh, n: int) -> np.ndarray:
+    """Points near the surface, in the bounds, just outside them (0-3 mm, across BOX_MARGIN) and far out."""
+    rng = np.random.default_rng(4)
+    lo, hi = mesh.bounds
+    near = mesh.sample(n, seed=4) + rng.normal(size=(n, 3)) * rng.uniform(0, 0.05, (n, 1))
+    box = rng.uniform(lo - 0.3, hi + 0.3, (n, 3))
+    rim = rng.uniform(lo, hi, (n, 3))
+    axis, side = rng.integers(0, 3, n), rng.integers(0, 2, n)
+    rim[np.arange(n), axis] = np.where(side == 1, hi[axis], lo[axis]) + (2 * side - 1) * rng.uniform(0, 3e-3, n)
+    return np.concatenate([near, box, rim])
+
+
+def _assert_same_field_as_the_winding_number_everywhere(shape: MeshShape, mesh: trimesh.Trimesh, p: np.ndarray):
+    lo, hi = mesh.bounds
+    out = np.abs(np.clip(p, lo, hi) - p).max(1)
+    assert (out > 2 * BOX_MARGIN).mean() > 0.2 and (out == 0).mean() > 0.2  # both branches of the bounds test
+    phi, grad, closest = shape.exact(p, np)
+    ref = _winding_everywhere(shape, p)
+    assert (((p - ref[2]) * ref[1]).sum(1) < 0).any()  # some points are inside
+    for a, b in zip((phi, np.stack(grad, 1), np.stack(closest, 1)), ref):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
+
+
+def test_bounds_test_keeps_the_field_on_a_mesh_with_holes(tmp_path):
+    """Outside the bounds (+ margin) the winding number is skipped: the same phi, grad, closest as with it,
+    on a non-watertight mesh (the bumpy sphere without its top cap and 10% of its faces)."""
+    m = trimesh.creation.icosphere(subdivisions=4, radius=0.2)
+    v = m.vertices * (1.0 + 0.15 * np.sin(5 * m.vertices[:, :1] / 0.2) * np.cos(3 * m.vertices[:, 1:2] / 0.2))
+    keep = (m.triangles_center[:, 2] < 0.12) & (np.random.default_rng(6).uniform(size=len(m.faces)) > 0.1)
+    mesh = trimesh.Trimesh(v, m.faces[keep], process=False)
+    assert not mesh.is_watertight
+    shape = MeshShape.from_geometry(MeshGeometry(_write(tmp_path, mesh)), cache=False)
+    _assert_same_field_as_the_winding_number_everywhere(shape, mesh, _bounds_probe(mesh, 3000))
 
 
 def _brute(mesh: trimesh.Trimesh, p: np.ndarray):
@@ -174,3 +240,13 @@ def test_real_scan_outside_is_outside():
     p = p[np.abs(np.clip(p, lo, hi) - p).max(1) > 0.05]
     s = field.query(p, IDENTITY)
     assert (((p - s.closest) * s.grad).sum(1) > 0).all()
+
+
+@needs_shared
+@pytest.mark.parametrize("name", ["omomo/largebox.obj", "intermimic/largetable_largetable.obj"])
+def test_real_scan_bounds_test_keeps_the_field(name):
+    """Real scans (not watertight): the bounds test gives the field of the winding number everywhere."""
+    path = SHARED_MOCAP / name
+    mesh = trimesh.load(path, force="mesh", process=False)
+    shape = MeshShape.from_geometry(MeshGeometry(str(path)), cache=False)
+    _assert_same_field_as_the_winding_number_everywhere(shape, mesh, _bounds_probe(mesh, 4000))
