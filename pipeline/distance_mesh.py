@@ -47,7 +47,6 @@ from pipeline.geometry import MeshGeometry
 from pipeline.warp_runtime import warp as _warp
 
 EPS_MESH = 1e-6  # m: below this the direction (p - c)/phi is float32 noise; the face normal is used
-_MAX_DIST = 1.0e6
 # m: the bounds test leaves the winding number to points this near the box, where a sheet in a
 # bounding plane seen from behind gives w -> 1/2 and float32 rounding decides (as before the test).
 # Beyond it the surface lies in a half-space away from p, so |w| < 1/2 unless some ray from p
