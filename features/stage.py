@@ -24,8 +24,9 @@ from pipeline.clip import PhysicalizedClip
 from pipeline.dataset import Feature
 from pipeline.errors import InputError
 from pipeline.interaction import DEMO_PARTS, DF_PARTS, feature_names
-from pipeline.link_motion import body_ids, robot_model
+from pipeline.link_motion import body_ids
 from pipeline.observations import PROPRIO_NAMES, ROOT_COMMAND_NAMES
+from pipeline.robot import g1_model
 
 CARD_NOTES = [
     "DF features follow LessMimic Sec. III-A: per link, phi = unsigned distance from the link's body origin to the nearest "
@@ -91,7 +92,7 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
     from pipeline.stage_state import KEY, dataset_fingerprint, fingerprint, up_to_date
 
     cfg = config or FeatureConfig()
-    body_ids(robot_model(), cfg.query_links, "--links")  # an unknown link fails before any work
+    body_ids(g1_model(), cfg.query_links, "--links")  # an unknown link fails before any work
     src, out = stage_dir(name, "physicalized"), stage_dir(name, "features")
     if not (src / "meta" / "info.json").is_file():
         ran = src.parent / "logs" / "physicalized" / "report.json"

@@ -77,7 +77,9 @@ def _path_joints(model: mujoco.MjModel, b1: int, b2: int) -> list[int]:
     return [j for b in bodies for j in range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b])]
 
 
-_KEPT_APART: dict[str, frozenset[tuple[int, int]]] = {}
+_KEPT_APART: dict[str, frozenset[tuple[int, int]]] = {}  # pairs_kept_apart_by_joint_limits's cache, keyed by the model arrays below
+_TREE_FIELDS = ("geom_type", "geom_size", "geom_pos", "geom_quat", "geom_bodyid", "geom_rbound", "body_parentid", "body_pos", "body_quat",
+                "body_jntadr", "body_jntnum", "jnt_type", "jnt_range", "jnt_limited", "jnt_pos", "jnt_axis", "jnt_qposadr", "qpos0")  # fmt: skip
 
 
 def pairs_kept_apart_by_joint_limits(model: mujoco.MjModel, pairs: list[tuple[int, int]], samples: int = 41) -> set[tuple[int, int]]:
@@ -98,10 +100,6 @@ def pairs_kept_apart_by_joint_limits(model: mujoco.MjModel, pairs: list[tuple[in
     if key not in _KEPT_APART:
         _KEPT_APART[key] = frozenset(_kept_apart(model, pairs, samples))
     return set(_KEPT_APART[key])
-
-
-_TREE_FIELDS = ("geom_type", "geom_size", "geom_pos", "geom_quat", "geom_bodyid", "geom_rbound", "body_parentid", "body_pos", "body_quat",
-                "body_jntadr", "body_jntnum", "jnt_type", "jnt_range", "jnt_limited", "jnt_pos", "jnt_axis", "jnt_qposadr", "qpos0")  # fmt: skip
 
 
 def _kept_apart(model: mujoco.MjModel, pairs: list[tuple[int, int]], samples: int) -> set[tuple[int, int]]:

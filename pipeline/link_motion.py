@@ -1,7 +1,7 @@
 """World positions, orientations and linear velocities of G1 links along a trajectory, from MuJoCo.
 
 For each frame the robot's ``(qpos, qvel)`` goes into a robot-only MuJoCo model (the G1 of
-:func:`pipeline.robot.g1_xml_path`), forward kinematics places the bodies, and
+:func:`pipeline.robot.g1_model`), forward kinematics places the bodies, and
 ``mj_comVel`` gives each body's 6-D velocity ``cvel = (w, v_c)`` in world orientation at the centre
 of mass ``c`` of its kinematic tree; the velocity of the body origin ``x`` (where the features query
 the field) is ``v = v_c + w x (x - c)``, i.e. ``J_p(q) qd`` for the origin: the link velocity of the
@@ -16,6 +16,7 @@ import mujoco
 import numpy as np
 
 from pipeline.errors import InputError
+from pipeline.robot import g1_model
 
 
 @dataclass(frozen=True)
@@ -27,12 +28,6 @@ class LinkMotion:
     pos: np.ndarray
     rot: np.ndarray
     vel: np.ndarray
-
-
-def robot_model() -> mujoco.MjModel:
-    from pipeline.robot import g1_model
-
-    return g1_model()
 
 
 def body_ids(model: mujoco.MjModel, links: tuple[str, ...] | list[str], source: str | None = None) -> list[int]:
@@ -49,7 +44,7 @@ def body_ids(model: mujoco.MjModel, links: tuple[str, ...] | list[str], source: 
 def link_motion(qpos: np.ndarray, qvel: np.ndarray, links: tuple[str, ...], source: str | None = None) -> LinkMotion:
     """Link poses and velocities for G1 ``qpos (T, 36)`` and MuJoCo ``qvel (T, 35)`` (root linear velocity
     in the world, root angular velocity in the root frame, joint velocities)."""
-    m = robot_model()
+    m = g1_model()
     ids = body_ids(m, links, source)
     if qpos.shape[1:] != (m.nq,) or qvel.shape[1:] != (m.nv,) or len(qpos) != len(qvel):
         raise InputError(source, "qpos/qvel", f"expected (T, {m.nq}) and (T, {m.nv}), got {qpos.shape} and {qvel.shape}")

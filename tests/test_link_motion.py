@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from pipeline.errors import InputError
-from pipeline.link_motion import robot_model, link_motion
+from pipeline.link_motion import link_motion
+from pipeline.robot import g1_model
 from pipeline.robot import G1_LINK_NAMES, actuator_profile, default_qpos
 
 
@@ -19,7 +20,7 @@ def _trajectory(T=40, fps=200.0):
     q[:, 3:7] = np.stack([np.cos(yaw / 2) * np.cos(roll / 2), np.cos(yaw / 2) * np.sin(roll / 2), -np.sin(yaw / 2) * np.sin(roll / 2),
                           np.sin(yaw / 2) * np.cos(roll / 2)], 1)  # fmt: skip
     q[:, 7:] += 0.3 * np.sin(2 * t[:, None] + np.arange(29))
-    m = robot_model()
+    m = g1_model()
     v = np.zeros((T, 35))
     for k in range(T):
         a, b = max(k - 1, 0), min(k + 1, T - 1)
