@@ -12,7 +12,7 @@ objects: each point takes the nearest object (:class:`ObjectFields`), first obje
 
 Every query runs on numpy arrays or torch tensors (CPU or CUDA), with the same math; inputs are
 processed in chunks of :data:`CHUNK` points so the working set stays in cache. A shape with a
-``world(points, R, t)`` method (the scaled sphere, cylinder, capsule) does the pose in its warp
+``world(points, R, t)`` method (the box, the chair, the scaled sphere, cylinder, capsule) does the pose in its warp
 kernel for numpy points at one pose or at one pose per frame (:meth:`ObjectField.query_links`):
 same math, no numpy per-point pass; it returns None to decline. Per-point poses take the numpy pass.
 """

@@ -15,7 +15,9 @@ the radius). A per-axis scale keeps a box a box but turns a sphere into an ellip
 cylinder into an elliptic cylinder and a capsule into an elliptic cylinder with ellipsoidal
 caps; those use :mod:`pipeline.distance_ellipsoid` (exact to rounding), run point by point in the
 fused float64 warp kernels of :mod:`pipeline.distance_scaled_warp` (numpy, torch CPU or CUDA; the
-numpy/torch ``local_xp`` where warp cannot run, and as the kernels' reference). For the scaled capsule
+numpy/torch ``local_xp`` where warp cannot run, and as the kernels' reference). The box and the chair
+(union of boxes) are numpy/torch in ``local``; their ``world`` (a pose per frame, numpy points) runs the
+same math fused with the pose in :mod:`pipeline.distance_box_warp`. For the scaled capsule
 (fold z to z >= 0, cap ellipsoid E centred at +H):
 
 * outside: the solid is convex and symmetric, so the nearer of the projections onto the
@@ -111,6 +113,12 @@ class BoxShape:
 
     def local(self, x, y, z, xp):
         return _box(x, y, z, *self.half, xp)
+
+    def world(self, points, R, t):
+        """As :meth:`SphereShape.world`: the fused kernel of :mod:`pipeline.distance_box_warp`."""
+        from pipeline import distance_box_warp
+
+        return distance_box_warp.box_world_field(self.half, points, R, t)
 
 
 @dataclass(frozen=True)
@@ -306,6 +314,12 @@ class ChairShape:
         hx, hy, hz, ox, oy, oz = (table[part, i] for i in range(6))
         phi, g, c = _box(x - ox, y - oy, z - oz, hx, hy, hz, xp)
         return phi, g, (c[0] + ox, c[1] + oy, c[2] + oz)
+
+    def world(self, points, R, t):
+        """As :meth:`SphereShape.world`: the fused kernel of :mod:`pipeline.distance_box_warp` (same tie rule)."""
+        from pipeline import distance_box_warp
+
+        return distance_box_warp.boxes_world_field(tuple((box.half, o) for box, o in self.parts), points, R, t)
 
 
 def primitive_shape(p: Primitive):
