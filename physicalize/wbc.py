@@ -9,7 +9,7 @@ sole corners of each stance foot::
           J_foot qdd + Jdot_foot qd = a_foot*                   (stance feet, 6 rows each)
           |f_x|, |f_y| <= mu f_z / sqrt 2,  f_z >= 0           (friction pyramids inscribed in the cones per corner)
           -e tau_max <= M_a qdd + h_a - J_{c,a}^T f - tau_ext,a <= e tau_max   (e = effort_scale, 0.95)
-          G qdd - s <= h,  s >= 0,  + w_s ||s||^2                 (soft rows: joint ranges, touchdown; wbc_rows)
+          G qdd - s <= h,  s >= 0,  + w_s ||s||^2                 (soft rows: joint ranges, touchdown, legs off objects; wbc_rows)
 
 ``M`` and ``h = qfrc_bias - qfrc_passive`` come from the simulation's own model (so the held
 object's inertia is not in ``M``, but its measured contact forces on the robot are in
@@ -54,6 +54,7 @@ FOOT_BODIES = ("left_ankle_roll_link", "right_ankle_roll_link")
 HAND_BODIES = ("left_wrist_yaw_link", "right_wrist_yaw_link")
 GRIP_LINKS = ("elbow_link", "wrist_roll_link", "wrist_pitch_link", "wrist_yaw_link")  # forearm and hand: a held object's contacts on them are planned
 CONTROL_DT = 0.02
+CLEAR_LINKS = ("hip_roll", "hip_yaw", "knee", "ankle_pitch")  # leg links whose contact with an object is never planned
 
 
 @dataclass(frozen=True)
@@ -92,6 +93,9 @@ class WBCConfig:
     touchdown_speed: float = 0.8  # m/s (0.5 fell in test_gait's -y push while walking): a descent-speed cap zdd >= -a (zd + speed)
     touchdown_zone: float = 0.10  # m: sole corners higher than this get no row
     hand_lead: float = 0.05  # m: a held object farther than this from its reference position takes the hand targets along (the rest stays a bounded push towards the reference)
+    clearance: float = 0.0  # m: legs keep this far from objects (their contact is never planned; 0.01: the OMOMO clip fell at 0.62 s)
+    clearance_rate: float = 15.0  # a [1/s] of the clearance barrier (0: no rows; see physicalize.wbc_rows.clearance_rows)
+    clearance_zone: float = 0.05  # m: pairs farther than clearance + this get no row
     w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
     # contact state from the simulation
     contact_stance: bool = True
@@ -160,6 +164,9 @@ class WholeBodyController:
         self.robot_mass = float(sum(model.body_mass[b] for b in self.robot_bodies))
         self.robot_geoms = {g for g in range(model.ngeom) if model.geom_bodyid[g] in set(self.robot_bodies)}
         self.floor = model.geom("floor").id
+        legs = [g for g in self.robot_geoms if model.geom_contype[g] and any(k in model.body(model.geom_bodyid[g]).name for k in CLEAR_LINKS)]
+        objects = [g for g in range(model.ngeom) if model.geom_contype[g] and model.geom_bodyid[g] and g not in self.robot_geoms]
+        self.clear_pairs = [(g, o) for g in legs for o in objects]
         self.effort = profile.effort_limit
         self.q_lo, self.q_hi = model.jnt_range[[model.joint(j).id for j in G1_JOINT_NAMES]].T.copy()
         self._M = np.zeros((model.nv, model.nv))

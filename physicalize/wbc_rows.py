@@ -1,5 +1,5 @@
 """The whole-body QP's soft inequality rows (called by :meth:`physicalize.wbc.WholeBodyController.solve`):
-joint-range barriers and swing-foot touchdown speed caps, ``G qdd <= h``, each kept with a slack
+joint-range barriers, swing-foot touchdown speed caps and leg-object clearance, ``G qdd <= h``, each kept with a slack
 ``s >= 0`` of weight ``w_limit_slack`` so that the QP stays feasible where a row cannot hold
 (``G qdd - s <= h``). ``ctrl`` is the :class:`~physicalize.wbc.WholeBodyController`.
 
@@ -9,6 +9,7 @@ remained); zero force on stance sole corners more than 1 cm above the floor (wal
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 
 from pipeline.robot import NUM_JOINTS
@@ -26,7 +27,10 @@ def soft_rows(ctrl, d, target, stance: list[int]) -> tuple[np.ndarray, np.ndarra
       ``v = touchdown_speed``: ``zdd >= -a (zd + v)`` (``a`` = ``touchdown_rate``), so a foot is not
       driven into the floor (the floor's soft contact let a 2 m/s strike sink the sole 3.5 cm). A
       barrier towards a depth below the floor instead (like the joint ranges') measured worse: it
-      delayed landings (Push fell at 108-143 frames with it, 207-277 without).
+      delayed landings (Push fell at 108-143 frames with it, 207-277 without);
+    * legs off objects (:func:`clearance_rows`): no contact between a leg link and an object is planned,
+      and one measured in the simulation is a force the QP never chose (PickUp's knee came down on the
+      box's top edge, 110 N up and 90 N back, and the robot fell backwards).
     """
     cfg, nv = ctrl.cfg, NV_ROBOT
     Gs, hs = [], []
@@ -57,7 +61,42 @@ def soft_rows(ctrl, d, target, stance: list[int]) -> tuple[np.ndarray, np.ndarra
                 bound = -a * (zd + cfg.touchdown_speed)  # a speed cap only: zdd >= -a (zd + v_max)
                 Gs.append(-jp[2])
                 hs.append(bp[2] - bound)
+    if cfg.clearance_rate > 0 and ctrl.clear_pairs:
+        G, h = clearance_rows(ctrl, d)
+        Gs += G
+        hs += h
     return np.array(Gs).reshape(-1, nv), np.array(hs)
+
+
+def clearance_rows(ctrl, d) -> tuple[list, list]:
+    """Rows that keep the legs off the objects (``ctrl.clear_pairs``: leg geom, object geom).
+
+    For a pair closer than ``clearance + clearance_zone`` with signed distance ``d`` (``mj_geomDistance``),
+    unit normal ``n`` from the leg's nearest point ``p`` to the object's, ``dd = -n^T J_p qd`` and
+    ``ddd = -n^T (J_p qdd + Jdot_p qd)`` (the object taken at rest), the same critically damped barrier as
+    the joint ranges, ``ddd + 2 a dd + a^2 max(d - clearance, 0) >= 0`` (``a`` = ``clearance_rate``):
+    ``n^T J_p qdd <= -n^T Jdot_p qd + 2 a dd + a^2 max(d - clearance, 0)``. Inside the clearance (a leg
+    that starts next to the object) the row only brakes the approach: pushing it out kicked the robot over."""
+    cfg, m = ctrl.cfg, ctrl.m
+    a, reach = cfg.clearance_rate, cfg.clearance + cfg.clearance_zone
+    Gs, hs = [], []
+    fromto = np.zeros(6)
+    for g, o in ctrl.clear_pairs:
+        if np.linalg.norm(d.geom_xpos[g] - d.geom_xpos[o]) - m.geom_rbound[g] - m.geom_rbound[o] > reach:
+            continue
+        dist = mujoco.mj_geomDistance(m, d, g, o, reach, fromto)
+        if dist >= reach:
+            continue
+        n = fromto[3:] - fromto[:3]
+        nn = np.linalg.norm(n)
+        if nn < 1e-9:
+            continue
+        n = n / nn if dist >= 0 else -n / nn
+        jp, _, bp, _ = ctrl._jac(d, int(m.geom_bodyid[g]), fromto[:3].copy())
+        dd = -n @ (jp @ d.qvel[:NV_ROBOT])
+        Gs.append(n @ jp)
+        hs.append(-n @ bp + 2 * a * dd + a * a * max(dist - cfg.clearance, 0.0))
+    return Gs, hs
 
 
 def limit_bounds(ctrl, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -2,6 +2,7 @@
 (closed loop, real physics): a deep squat whose ankle-pitch reference passes its range end, with
 arm references beyond their ranges."""
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -11,7 +12,8 @@ from physicalize.validate import LIMIT_TOL
 from physicalize.wbc import WBCConfig, WholeBodyController
 from physicalize.wbc_rows import limit_bounds
 from pipeline.robot import G1_JOINT_NAMES, default_qpos
-from pipeline.scene import build_scene
+from pipeline.geometry import Primitive
+from pipeline.scene import SceneObject, build_scene
 
 
 @pytest.fixture(scope="module")
@@ -80,3 +82,43 @@ def test_squat_with_references_beyond_the_range_stays_inside_it(scene):
     # without the range rows the same reference drives joints past their range
     free = _max_excess(scene, _track(scene, qpos, WBCConfig(joint_limits=False)).qpos)
     assert free.max() > LIMIT_TOL
+
+
+def _knee_geoms(m) -> list[int]:
+    return [g for g in range(m.ngeom) if m.geom_contype[g] and "knee" in m.body(m.geom_bodyid[g]).name]
+
+
+def _nearest_knee(scene, qpos: np.ndarray) -> float:
+    """Least signed distance between a knee geom and the block over the frames of ``qpos``."""
+    m, d = scene.model, mujoco.MjData(scene.model)
+    blocks = [g for g in range(m.ngeom) if m.geom_bodyid[g] == m.body("block").id]
+    dist = np.inf
+    for q in qpos:
+        d.qpos[: len(q)] = q
+        mujoco.mj_kinematics(m, d)
+        dist = min(dist, min(mujoco.mj_geomDistance(m, d, g, b, 0.5, None) for g in _knee_geoms(m) for b in blocks))
+    return dist
+
+
+def _block_scene(x: float):
+    half = (0.1, 0.3, 0.3)  # its top above the knees: they meet its front face
+    return build_scene([SceneObject("block", Primitive("box", half), pose=(x + half[0], 0.0, half[2], 1.0, 0.0, 0.0, 0.0), fixed=True)])
+
+
+def test_knees_stay_off_an_object_the_reference_squats_into():
+    """A fixed block stands where the squat's knees go (the knees of the tracked squat without the block
+    would enter it 1.5 cm): the clearance rows keep the knees off it; without them (``clearance_rate = 0``)
+    the knees hit it."""
+    q = _beyond_range_squat(build_scene())
+    free = _track(build_scene(), q, WBCConfig(clearance_rate=0.0)).qpos
+    x = 0.4
+    for _ in range(2):
+        x -= _nearest_knee(_block_scene(x), free) + 0.015
+    scene = _block_scene(x)
+    assert abs(_nearest_knee(scene, free) + 0.015) < 0.003
+    nearest = {}
+    for rate in (WBCConfig().clearance_rate, 0.0):
+        roll = _track(scene, q, WBCConfig(clearance_rate=rate))
+        nearest[rate] = (_nearest_knee(scene, roll.qpos), roll.fell_at)
+    assert nearest[WBCConfig().clearance_rate][0] > -0.002 and nearest[WBCConfig().clearance_rate][1] is None, nearest
+    assert nearest[0.0][0] < 0.0 and nearest[0.0][1] is not None, nearest  # the knees hit the block and the robot falls
