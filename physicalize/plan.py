@@ -1,10 +1,12 @@
 """Layer 1 of the teacher: a dynamically feasible centre-of-mass plan for the reference's contact
 schedule, by ZMP preview control (Kajita et al., ICRA 2003).
 
-The ZMP reference at each frame is the kinematic CoM's ground projection clipped into the
-support polygon of the stance feet (the convex hull of their sole corners): in double support
-the polygon shrunk by :data:`MARGIN` (3 cm: room for the tracker's CoP feedback), where the
-human's balance was already feasible the plan keeps it; in single support the stance foot's
+The ZMP reference at each frame is the reference's centre of pressure -- the kinematic CoM's ground
+projection, moved by the reactions of the forces the hands apply to held objects (:func:`hand_cop_shift`:
+a 50 N push leans the human 15 cm into it) -- clipped into the support polygon of the stance feet (the
+convex hull of their sole corners): in double support the polygon scaled by :data:`DOUBLE_SUPPORT_SCALE`
+about its centre (the CoM of a quick squat near the heels fell behind them: PickUp's knees then hit the
+box, and it fell) and shrunk by :data:`MARGIN`; in single support the stance foot's
 polygon scaled by :data:`SINGLE_SUPPORT_SCALE` about its centre, so the ZMP is pulled onto the
 middle of the foot and the tracker keeps room to move the CoP for feedback (clipping to the
 foot's edge left none: the robot fell behind its plan in every single support). The cart-table model
@@ -12,7 +14,7 @@ foot's edge left none: the robot fell behind its plan in every single support). 
     x_{k+1} = A x_k + B u_k,   x = (c, c_dot, c_ddot) per horizontal axis,  u = jerk,
     p_k = C x_k = c - (z_c / g) c_ddot
 
-is driven by the optimal preview law ``u_k = -G_i sum_j (p_j - p*_j) - G_x x_k - sum_{j=1..N} G_d[j] p*_{k+j}``
+(plus the hands' shift) is driven by the optimal preview law ``u_k = -G_i sum_j (p_j - p*_j) - G_x x_k - sum_{j=1..N} G_d[j] p*_{k+j}``
 (gains from the discrete Riccati equation of the error-augmented system, ``N`` = 1.6 s of preview),
 so the planned CoM's ZMP follows the reference inside the support region. The height ``z_c`` is the
 mean kinematic CoM height; the CoM's vertical motion is kept from the reference.
@@ -20,6 +22,7 @@ mean kinematic CoM height; the CoM's vertical motion is kept from the reference.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -30,6 +33,7 @@ from physicalize.reference import Reference
 
 GRAVITY = 9.81
 MARGIN = 0.03
+DOUBLE_SUPPORT_SCALE = 0.5  # run3 frames before a fall, 7 clips x 3 windows: 1.0 -> 4877 (with the hands' shift and the leg clearance rows: 0.7 -> 5459, 0.5 -> 6093)
 SINGLE_SUPPORT_SCALE = 0.3  # single-support ZMP within this fraction of the foot about its centre
 PREVIEW_S = 1.6
 
@@ -83,28 +87,57 @@ def clip_to_polygon(p: np.ndarray, poly: np.ndarray, margin: float = MARGIN) -> 
     return best
 
 
-def zmp_reference(ref: Reference, single_support_scale: float = SINGLE_SUPPORT_SCALE) -> np.ndarray:
-    """(T, 2) ZMP reference: the kinematic CoM projection clipped into each frame's support polygon
-    (in single support, the polygon scaled by ``single_support_scale`` about its centre)."""
+@dataclass(frozen=True)
+class HandLoads:
+    """Forces the hands apply to held objects, ``force`` (T, 2, 3) at ``point`` (T, 2, 3) (world), and the
+    robot's ``mass``: their reactions move the feet's centre of pressure (:func:`hand_cop_shift`)."""
+
+    point: np.ndarray
+    force: np.ndarray
+    mass: float
+
+
+def hand_cop_shift(com: np.ndarray, loads: HandLoads) -> np.ndarray:
+    """(T, 2) shift ``e`` of the feet's centre of pressure from the CoM projection that the hands' reactions
+    ``F_k = -f_k`` at ``h_k`` cause in static balance (moments about the CoP ``p`` on the floor, ``z = 0``)::
+
+        e_x = (sum_k h_k,z F_k,x - (h_k,x - c_x) F_k,z) / (m g - sum_k F_k,z)     (y alike)
+
+    A push of 50 N at 1 m height moves it about 15 cm behind the CoM: the human leans into the push."""
+    F = -loads.force
+    h = loads.point
+    load = loads.mass * GRAVITY - F[..., 2].sum(axis=1)
+    e = np.stack([(h[..., 2] * F[..., i] - (h[..., i] - com[:, None, i]) * F[..., 2]).sum(axis=1) for i in range(2)], -1)
+    return e / load[:, None]
+
+
+def zmp_reference(ref: Reference, single_support_scale: float = SINGLE_SUPPORT_SCALE, shift: np.ndarray | None = None) -> np.ndarray:
+    """(T, 2) ZMP reference: the reference's centre of pressure, the kinematic CoM projection moved by
+    the hands' ``shift`` (:func:`hand_cop_shift`), clipped into each frame's support polygon (scaled by
+    :data:`DOUBLE_SUPPORT_SCALE`, in single support by ``single_support_scale``, about its centre)."""
+    cop = ref.com[:, :2] if shift is None else ref.com[:, :2] + shift
     out = np.zeros((ref.frames, 2))
     for t in range(ref.frames):
         poly = support_polygon(ref, t)
+        c = poly.mean(axis=0)
         if ref.stance[t].all():
-            out[t] = clip_to_polygon(ref.com[t, :2], poly)
+            out[t] = clip_to_polygon(cop[t], c + DOUBLE_SUPPORT_SCALE * (poly - c))
         else:
-            c = poly.mean(axis=0)
-            out[t] = clip_to_polygon(ref.com[t, :2], c + single_support_scale * (poly - c), 0.0)
+            out[t] = clip_to_polygon(cop[t], c + single_support_scale * (poly - c), 0.0)
     return out
 
 
-def plan_com(ref: Reference) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def plan_com(ref: Reference, loads: HandLoads | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(com_plan (T, 3), zmp_ref (T, 2), zmp_plan (T, 2)): the preview-controlled CoM, starting at
-    the reference's first CoM and CoM velocity."""
+    the reference's first CoM and CoM velocity. With the hands' ``loads`` the centre of pressure is
+    the cart-table ZMP plus their shift ``e``: the cart tracks ``zmp_ref - e`` (both returned with ``e``)."""
     dt = 1.0 / ref.fps
     zc = float(np.mean(ref.com[:, 2] - np.min(ref.corners[..., 2], axis=(1, 2))))
     n = int(round(PREVIEW_S / dt))
     gi, gx, gd = preview_gains(dt, zc, n)
-    pref = zmp_reference(ref)
+    shift = np.zeros((ref.frames, 2)) if loads is None else hand_cop_shift(ref.com, loads)
+    cop_ref = zmp_reference(ref, shift=shift)
+    pref = cop_ref - shift
     T = ref.frames
     padded = np.concatenate([pref, np.repeat(pref[-1:], n, axis=0)])
     A = np.array([[1.0, dt, dt * dt / 2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
@@ -121,4 +154,4 @@ def plan_com(ref: Reference) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         err += p - pref[k]
         u = -gi * err - gx @ x - gd @ padded[k + 1 : k + 1 + n]
         x = A @ x + np.outer(B, u)
-    return np.column_stack([com, ref.com[:, 2]]), pref, zmp
+    return np.column_stack([com, ref.com[:, 2]]), cop_ref, zmp + shift

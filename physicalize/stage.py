@@ -21,6 +21,7 @@ import pickle
 import shutil
 import time
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -99,7 +100,7 @@ def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "
     Shared by :func:`physicalize_clip` and the residual's training (:mod:`physicalize.residual`)."""
     from physicalize.feasible import feasible_reference
     from physicalize.grasp import grasp_schedule, seat_ramp
-    from physicalize.plan import plan_com
+    from physicalize.plan import HandLoads, plan_com
     from physicalize.reference import build_reference
 
     if reference not in REFERENCES:
@@ -116,16 +117,16 @@ def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "
         for o in (o for o in clip.objects if o.name in scene.object_qpos_adr):  # free objects; fixed ones are in the model
             adr = scene.object_qpos_adr[o.name] - 36
             obj_q[:, adr : adr + 7] = o.pose[: ref.frames]
-        hands = None
+        hands = pre = None
         if grasp:  # hands held on an object move with its reference track (the retargeted hands drift off it): the IK re-solves the arms onto that
             pre = grasp_schedule(scene, ref, clip.contact_links, clip.contacts, {o.name: o.pose for o in clip.objects})
             hands = None if pre is None else pre.hand_body_targets()
-        plan_fn = plan_com
+        plan_fn = plan_com if pre is None else partial(plan_com, loads=HandLoads(pre.attached, pre.force, float(m.body_subtreemass[m.body("pelvis").id])))
         seat = seat_ramp(clip.contact_links, clip.contacts, ref.frames) if grasp else None
         if seat is not None:  # sitting: the seat carries the body, the CoM goes where the reference puts it
 
-            def plan_fn(r, _s=seat[:, None]):
-                out = plan_com(r)
+            def plan_fn(r, _s=seat[:, None], base=plan_fn):
+                out = base(r)
                 return ((1 - _s) * out[0] + _s * r.com, *out[1:])
 
         ref = feasible_reference(m, ref, plan_fn, stats=stats, objects=obj_q if clip.objects else None, hand_targets=hands)
