@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.distance_field import ObjectField, rotation_rows
+from fused_poses import check_pose_per_frame
+from pipeline.distance_field import ObjectField
 from pipeline.distance_primitive import _box_phi, chair_shape, primitive_shape
 from pipeline.geometry import Chair, Primitive
 
@@ -105,15 +106,7 @@ def test_pose_per_frame_fused_kernel_equals_the_numpy_pose_transform(geom):
     frames, links = 60, 20
     local = rng.uniform(-0.8, 0.8, (frames, links, 3)) + [0.0, 0.0, 0.4 * isinstance(geom, Chair)]
     poses = np.c_[rng.uniform(-2, 2, (frames, 3)), rng.normal(size=(frames, 4)) * rng.uniform(0.2, 3.0, (frames, 1))]
-    R = np.stack([np.stack(r, -1) for r in rotation_rows(poses[:, 3:], np)], -2)
-    world = np.einsum("tij,tkj->tki", R, local) + poses[:, None, :3]
-    fused = field.query_links(world, poses)
-    ref = field.query(world.reshape(-1, 3), np.repeat(poses, links, axis=0))
-    assert fused.phi.shape == (frames, links) and fused.grad.shape == fused.closest.shape == (frames, links, 3)
-    for a, b in zip(fused, ref):
-        np.testing.assert_allclose(a.reshape(b.shape), b, rtol=0, atol=1e-9)
+    world = check_pose_per_frame(field, local, poses)
     one = field.query(world[0], poses[0])
     for a, b in zip(one, field.query(world[0], np.tile(poses[0], (links, 1)))):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
-    empty = field.query_links(np.zeros((3, 0, 3)), poses[:3])
-    assert empty.phi.shape == (3, 0) and empty.closest.shape == (3, 0, 3)

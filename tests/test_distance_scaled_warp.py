@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from fused_poses import check_pose_per_frame
 from pipeline.distance_primitive import primitive_shape
 from pipeline.geometry import Primitive
 
@@ -104,21 +105,7 @@ def test_pose_per_frame_fused_kernel_equals_the_numpy_pose_transform(prim):
     frames, links = 50, 40
     local = _points(field.shape, frames * links)[rng.permutation(frames * links)].reshape(frames, links, 3)
     poses = np.c_[rng.uniform(-2, 2, (frames, 3)), rng.normal(size=(frames, 4)) * rng.uniform(0.2, 3.0, (frames, 1))]
-    R = np.stack([np.stack(r, -1) for r in _rows(poses[:, 3:])], -2)
-    world = np.einsum("tij,tkj->tki", R, local) + poses[:, None, :3]
-    fused = field.query_links(world, poses)
-    ref = field.query(world.reshape(-1, 3), np.repeat(poses, links, axis=0))
-    assert fused.phi.shape == (frames, links) and fused.grad.shape == fused.closest.shape == (frames, links, 3)
-    for a, b in zip(fused, ref):
-        np.testing.assert_allclose(a.reshape(b.shape), b, rtol=0, atol=1e-9)
+    world = check_pose_per_frame(field, local, poses)
     one = field.query_links(world[:1], poses[:1])  # a single frame is the one-pose kernel
     np.testing.assert_allclose(one.phi[0], field.query(world[0], poses[0]).phi, rtol=0, atol=0)
-    empty = field.query_links(np.zeros((3, 0, 3)), poses[:3])
-    assert empty.phi.shape == (3, 0) and empty.closest.shape == (3, 0, 3)
     assert field.query_links(np.zeros((0, 5, 3)), np.zeros((0, 7))).grad.shape == (0, 5, 3)
-
-
-def _rows(q):
-    from pipeline.distance_field import rotation_rows
-
-    return rotation_rows(q, np)
