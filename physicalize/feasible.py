@@ -53,6 +53,7 @@ from scipy.spatial.transform import Rotation
 
 from physicalize.plan import plan_com
 from physicalize.reference import Reference, build_reference
+from physicalize.seat import SEAT_LINKS
 from physicalize.wbc import FOOT_BODIES, HAND_BODIES, NV_ROBOT, sole_corners
 from pipeline.foot_contact import runs
 from pipeline.ik_limits import FrameVelocityLimit, SeparationLimit
@@ -72,6 +73,7 @@ class FeasibleConfig:
     swing_orientation_cost: float = 3.0
     hand_position_cost: float = 10.0
     hand_orientation_cost: float = 0.5
+    seat_position_cost: float = 300.0  # sitting links on their reference position while the seat supports them (physicalize.seat)
     pelvis_orientation_cost: float = 3.0
     torso_orientation_cost: float = 3.0
     posture_cost: float = 0.3
@@ -197,6 +199,8 @@ class ReferenceIK:
         self.torso = mink.FrameTask("torso_link", "body", 0.0, cfg.torso_orientation_cost, lm_damping=lm)
         self.com = mink.ComTask(cost=cfg.com_cost, lm_damping=lm)
         self.posture = mink.PostureTask(model, cost=cfg.posture_cost)
+        self.seat_ids = [model.body(b).id for b in SEAT_LINKS]
+        self.seat = [mink.FrameTask(b, "body", cfg.seat_position_cost, 0.0, lm_damping=lm) for b in SEAT_LINKS]
         self.config_limit = mink.ConfigurationLimit(model)
         self.knee_limit = MinimumJointLimit(model, {"left_knee_joint": cfg.min_knee, "right_knee_joint": cfg.min_knee})
         self.velocity_limit = FrameVelocityLimit(model, joint_velocity_limits(cfg.velocity_limit_factor), dt=1.0 / 50.0)
@@ -214,16 +218,17 @@ class ReferenceIK:
         self._link_ids = [model.body(b).id for b in (*HAND_BODIES, "pelvis", "torso_link")]
         self.stats: dict[str, float] = {}
 
-    def _reference_poses(self, qpos: np.ndarray) -> np.ndarray:
-        """(T, 4, 7) wxyz_xyz poses of the hands, pelvis and torso of the reference ``qpos`` (T, 36)."""
+    def _reference_poses(self, qpos: np.ndarray, bodies: list[int] | None = None) -> np.ndarray:
+        """(T, k, 7) wxyz_xyz poses of the ``bodies`` (default: the hands, pelvis and torso) of the reference ``qpos`` (T, 36)."""
+        ids = self._link_ids if bodies is None else bodies
         d = mujoco.MjData(self.model)
         d.qpos[:] = self.model.qpos0
-        out = np.zeros((len(qpos), len(self._link_ids), 7))
+        out = np.zeros((len(qpos), len(ids), 7))
         for t, q in enumerate(qpos):
             d.qpos[:NQ_ROBOT] = q
             mujoco.mj_kinematics(self.model, d)
-            out[t, :, :4] = d.xquat[self._link_ids]
-            out[t, :, 4:] = d.xpos[self._link_ids]
+            out[t, :, :4] = d.xquat[ids]
+            out[t, :, 4:] = d.xpos[ids]
         return out
 
     def _step(self, tasks: list, stance_tasks: list) -> None:
@@ -262,6 +267,7 @@ class ReferenceIK:
         t0 = time.perf_counter()
         feet = self.foot_targets = foot_targets(ref, self.sole_z, cfg.footstep_tolerance)
         links = self._reference_poses(ref.qpos)
+        seat = None if ref.seat is None else self._reference_poses(ref.qpos, self.seat_ids)
         if hand_targets is not None:
             links[:, :2, 4:] = hand_targets[:T]
         lo, hi = m.jnt_range[1:, 0], m.jnt_range[1:, 1]
@@ -288,6 +294,10 @@ class ReferenceIK:
             for task, pose in zip((*self.hands, self.pelvis, self.torso), links[t]):
                 task.set_target(mink.SE3(wxyz_xyz=pose))
             tasks, stance = [self.com, *self.hands, self.pelvis, self.torso, self.posture], []
+            if seat is not None:  # sitting links stay where the reference sits them (the CoM plan leans the body over them instead)
+                for i in np.flatnonzero(np.isfinite(ref.seat[t, :, 0])):
+                    self.seat[i].set_target(mink.SE3(wxyz_xyz=seat[t, i]))
+                    tasks.append(self.seat[i])
             for k, task in enumerate(self.feet):
                 task.set_target(mink.SE3(wxyz_xyz=np.concatenate([feet.quat[t, k], feet.pos[t, k]])))
                 (stance if feet.planted[t, k] else tasks).append(task)

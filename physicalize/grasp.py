@@ -97,11 +97,6 @@ class GraspConfig:
     clearance: float = 0.05  # m: an unlabelled hand's surface is kept this far from objects
     approach_frames: int = 25  # ... except this many frames before and after its labelled contacts (reaching, letting go)
     w_clear: float = 50.0
-    seat_ramp_frames: int = 15  # frames over which the CoM plan moves onto / off the reference CoM around a seat contact
-    seat_release_lag: int = 15  # frames after the seat contact label ends at which the CoM plan is back on the feet-only plan
-    seat_share: float = 0.0  # how far (at most) the CoM plan moves from the feet-only plan onto the reference CoM while seated; 0: off.
-    # SitStand with 1.0: the robot sits (pelvis + hips on the seat 86-102 frames, mpjpe 0.070 -> 0.058) but fails to stand up (fell at
-    # 8.06-8.12 s for ramps 15-50 frames, release lags -10..40): stuck 3 cm deeper and 2.5 cm lower than the reference, torso on the backrest
     side_lift: float = 0.5  # share of a lifted object's weight the hands carry when they hold it from one side (not squeezed between them)
     grip_above: float | None = 0.03  # m: a two-hand grip's axis is moved onto the vertical through the object's centre of mass, this high above it (None: where the reference hands are)  # hand task weight while it is kept off an object
 
@@ -378,23 +373,3 @@ def _floor_friction(model: mujoco.MjModel, geoms: list[int]) -> float:
     """Sliding friction of the object's geoms on the floor (MuJoCo's mixing rule)."""
     floor = model.geom("floor").id
     return max(contact_friction(model, g, floor)[1] for g in geoms) if geoms else 0.0
-
-
-def seat_ramp(contact_links: tuple[str, ...], contacts: np.ndarray | None, frames: int, cfg: GraspConfig = GraspConfig()) -> np.ndarray | None:
-    """(T,) in [0, 1]: how far the seat carries the body -- 1 on frames the clip labels the pelvis on an
-    object (runs shorter than ``min_run`` dropped), ramped over :attr:`GraspConfig.seat_ramp_frames` at
-    each end; ``None`` when the clip never sits. The CoM plan follows the reference CoM by this much
-    (:func:`physicalize.stage.tracking_problem`): a ZMP plan over the feet alone kept the pelvis 25 cm in
-    front of the seat (SitStand)."""
-    if cfg.seat_share <= 0 or contacts is None or "pelvis" not in contact_links:
-        return None
-    seat = keep_runs(keep_runs(np.asarray(contacts[:frames, list(contact_links).index("pelvis")], bool), cfg.min_run, True), cfg.min_run, False)
-    if not seat.any():
-        return None
-    n = cfg.seat_ramp_frames
-    out = np.zeros(frames)
-    for a, b in runs(seat):  # ramp in before the seat is reached and out after it is left
-        lo, hi = max(0, a - n), min(frames, b + cfg.seat_release_lag)
-        t = np.arange(lo, hi)
-        out[lo:hi] = np.maximum(out[lo:hi], np.clip(np.minimum((t - (a - n)) / n, (hi - t) / n), 0.0, 1.0))
-    return cfg.seat_share * out

@@ -4,7 +4,8 @@ schedule, by ZMP preview control (Kajita et al., ICRA 2003).
 The ZMP reference at each frame is the reference's centre of pressure -- the kinematic CoM's ground
 projection, moved by the reactions of the forces the hands apply to held objects (:func:`hand_cop_shift`:
 a 50 N push leans the human 15 cm into it) -- clipped into the support polygon of the stance feet (the
-convex hull of their sole corners): in double support the polygon scaled by :data:`DOUBLE_SUPPORT_SCALE`
+convex hull of their sole corners; while the reference sits, with its seat support points, :mod:`physicalize.seat`,
+unscaled): in double support the polygon scaled by :data:`DOUBLE_SUPPORT_SCALE`
 about its centre (the CoM of a quick squat near the heels fell behind them: PickUp's knees then hit the
 box, and it fell) and shrunk by :data:`MARGIN`; in single support the stance foot's
 polygon scaled by :data:`SINGLE_SUPPORT_SCALE` about its centre, so the ZMP is pulled onto the
@@ -62,9 +63,13 @@ def preview_gains(dt: float, zc: float, n: int, qe: float = 1.0, r: float = 1e-6
     return float(K[0, 0]), K[0, 1:].copy(), gd
 
 
-def support_polygon(ref: Reference, t: int) -> np.ndarray:
-    """(k, 2) vertices (counter-clockwise) of the stance feet's support polygon at frame ``t``."""
-    pts = np.concatenate([ref.corners[t, k, :, :2] for k in range(2) if ref.stance[t, k]])
+def support_polygon(ref: Reference, t: int, seat: bool = True) -> np.ndarray:
+    """(k, 2) vertices (counter-clockwise) of the support polygon at frame ``t``: the stance feet's sole
+    corners and, with ``seat``, the reference's seat support points (:func:`physicalize.seat.seat_support`)."""
+    pts = [ref.corners[t, k, :, :2] for k in range(2) if ref.stance[t, k]]
+    if seat and ref.seat is not None:
+        pts.append(ref.seat[t][np.isfinite(ref.seat[t, :, 0]), :2])
+    pts = np.concatenate(pts)
     hull = ConvexHull(pts)
     return pts[hull.vertices]
 
@@ -120,7 +125,9 @@ def zmp_reference(ref: Reference, single_support_scale: float = SINGLE_SUPPORT_S
     for t in range(ref.frames):
         poly = support_polygon(ref, t)
         c = poly.mean(axis=0)
-        if ref.stance[t].all():
+        if ref.seat is not None and np.isfinite(ref.seat[t, :, 0]).any():  # sitting: the hull of the feet and the seat
+            out[t] = clip_to_polygon(cop[t], poly)
+        elif ref.stance[t].all():
             out[t] = clip_to_polygon(cop[t], c + DOUBLE_SUPPORT_SCALE * (poly - c))
         else:
             out[t] = clip_to_polygon(cop[t], c + single_support_scale * (poly - c), 0.0)

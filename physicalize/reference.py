@@ -47,6 +47,7 @@ class Reference:
     hand_pos: np.ndarray  # (T, 2, 3)
     torso_quat: np.ndarray  # (T, 4)
     com_plan: np.ndarray | None = None  # (T, 3) feasible CoM (physicalize.plan), else the kinematic one
+    seat: np.ndarray | None = None  # (T, k, 3) seat support points, NaN rows where none (physicalize.seat.seat_support)
     grasp: object | None = None  # physicalize.grasp.GraspSchedule: hand targets and forces while holding objects
 
     @property
@@ -84,6 +85,7 @@ class Reference:
             qpos=self.qpos[t], qvel=self.qvel[t], qacc=self.qacc[t], com=com[t], com_vel=cv[t], com_acc=ca[t],
             stance=(bool(self.stance[t, 0]), bool(self.stance[t, 1])), foot_pos=self.foot_pos[t],
             foot_quat=self.foot_quat[t], foot_vel=fv[t], foot_acc=fa[t], sole_height=self.sole_height[t], hand_pos=self.hand_pos[t], torso_quat=self.torso_quat[t],
+            seated=self.seat is not None and bool(np.isfinite(self.seat[t, :, 0]).any()),
         )  # fmt: skip
         return target if self.grasp is None else self.grasp.fill(target, t)
 

@@ -99,37 +99,34 @@ def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "
     with ``grasp``, hands that hold an object squeeze it and carry its weight (:mod:`physicalize.grasp`).
     Shared by :func:`physicalize_clip` and the residual's training (:mod:`physicalize.residual`)."""
     from physicalize.feasible import feasible_reference
-    from physicalize.grasp import grasp_schedule, seat_ramp
+    from physicalize.grasp import grasp_schedule
     from physicalize.plan import HandLoads, plan_com
     from physicalize.reference import build_reference
+    from physicalize.seat import seat_support
 
     if reference not in REFERENCES:
         raise ValueError(f"unknown reference {reference!r}; known: {', '.join(REFERENCES)}")
     scene = _scene_for(clip, profile)
     ref = build_reference(scene.model, clip.qpos, clip.fps)
     zmp = None
+    m = scene.model
+    obj_q = np.repeat(m.qpos0[None, 36:], ref.frames, 0)
+    for o in (o for o in clip.objects if o.name in scene.object_qpos_adr):  # free objects; fixed ones are in the model
+        adr = scene.object_qpos_adr[o.name] - 36
+        obj_q[:, adr : adr + 7] = o.pose[: ref.frames]
+    ref.seat = seat_support(m, ref, clip.contact_links, clip.contacts, obj_q)  # the plan's support includes the seat
     if reference == "planned":
         ref.com_plan, _, zmp = plan_com(ref)
     elif reference == "feasible":
         stats: dict = {}
-        m = scene.model
-        obj_q = np.repeat(m.qpos0[None, 36:], ref.frames, 0)
-        for o in (o for o in clip.objects if o.name in scene.object_qpos_adr):  # free objects; fixed ones are in the model
-            adr = scene.object_qpos_adr[o.name] - 36
-            obj_q[:, adr : adr + 7] = o.pose[: ref.frames]
         hands = pre = None
         if grasp:  # hands held on an object move with its reference track (the retargeted hands drift off it): the IK re-solves the arms onto that
             pre = grasp_schedule(scene, ref, clip.contact_links, clip.contacts, {o.name: o.pose for o in clip.objects})
             hands = None if pre is None else pre.hand_body_targets()
         plan_fn = plan_com if pre is None else partial(plan_com, loads=HandLoads(pre.attached, pre.force, float(m.body_subtreemass[m.body("pelvis").id])))
-        seat = seat_ramp(clip.contact_links, clip.contacts, ref.frames) if grasp else None
-        if seat is not None:  # sitting: the seat carries the body, the CoM goes where the reference puts it
-
-            def plan_fn(r, _s=seat[:, None], base=plan_fn):
-                out = base(r)
-                return ((1 - _s) * out[0] + _s * r.com, *out[1:])
-
+        seat = ref.seat
         ref = feasible_reference(m, ref, plan_fn, stats=stats, objects=obj_q if clip.objects else None, hand_targets=hands)
+        ref.seat = seat
         zmp = stats["plan"][2]
     objects = {o.name: o.pose for o in clip.objects}
     if grasp:

@@ -38,6 +38,7 @@ class Target:
     hand_rot: np.ndarray | None = None  # (2, 3, 3) hand orientations, tracked with weights hand_rot_weight (2,)
     hand_rot_weight: np.ndarray | None = None
     hand_hold_body: np.ndarray | None = None  # (2,) body id of the object each hand holds, -1 none
+    seated: bool = False  # a seat carries the body: the QP holds its contacts (physicalize.seat)
     hand_hold_ref: np.ndarray | None = None  # (2, 3) that object's reference position: its lag beyond hand_lead moves the hand target along
 
 

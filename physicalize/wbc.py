@@ -2,12 +2,12 @@
 
 Every control step (50 Hz) it solves one quadratic program over the robot's generalized
 accelerations ``qdd`` (35: free root + 29 joints) and the 3-D contact forces ``f`` at the four
-sole corners of each stance foot::
+sole corners of each stance foot and, while seated, at the seat's support points (:mod:`physicalize.seat`)::
 
     min   sum_i w_i || J_i qdd + Jdot_i qd - a_i* ||^2  +  w_q ||qdd||^2  +  w_f ||f||^2
     s.t.  M_u qdd + h_u = J_{c,u}^T f + tau_ext,u              (floating base, 6 rows: no root actuation)
-          J_foot qdd + Jdot_foot qd = a_foot*                   (stance feet, 6 rows each)
-          |f_x|, |f_y| <= mu f_z / sqrt 2,  f_z >= 0           (friction pyramids inscribed in the cones per corner)
+          J_foot qdd + Jdot_foot qd = a_foot*                   (stance feet, 6 rows each; seat points 3 rows, alike)
+          |f.t_i| <= mu f.n / sqrt 2,  f.n >= 0                (friction pyramids inscribed in the cones per contact point)
           -e tau_max <= M_a qdd + h_a - J_{c,a}^T f - tau_ext,a <= e tau_max   (e = effort_scale, 0.95)
           G qdd - s <= h,  s >= 0,  + w_s ||s||^2                 (soft rows: joint ranges, touchdown, legs off objects; wbc_rows)
 
@@ -43,7 +43,7 @@ import mujoco
 import numpy as np
 from qpsolvers import solve_qp
 
-from physicalize import wbc_rows
+from physicalize import seat, wbc_rows
 from physicalize.stepping import Stepping
 from physicalize.target import Solution, Target
 from pipeline.robot import G1_JOINT_NAMES, NUM_JOINTS, ActuatorProfile
@@ -81,6 +81,8 @@ class WBCConfig:
     w_swing: float = 100.0
     w_hand: float = 5.0
     w_posture: float = 1.0
+    w_seat: float = 1000.0  # a seat support point's hold (physicalize.seat)
+    seated_foot_load: float = 0.1  # least share of the weight on each stance foot while seated
     w_qdd: float = 1e-4
     w_force: float = 1e-5
     effort_scale: float = 0.95  # the QP's torque bounds as a fraction of the actuators' effort limits (1.0: 31% of walk frames saturated)
@@ -164,9 +166,11 @@ class WholeBodyController:
         self.robot_mass = float(sum(model.body_mass[b] for b in self.robot_bodies))
         self.robot_geoms = {g for g in range(model.ngeom) if model.geom_bodyid[g] in set(self.robot_bodies)}
         self.floor = model.geom("floor").id
+        self.unseated_geoms = {g for g in self.robot_geoms if model.geom_bodyid[g] in self.feet} | set().union(*self.grip_geoms)  # never seat contacts
         legs = [g for g in self.robot_geoms if model.geom_contype[g] and any(k in model.body(model.geom_bodyid[g]).name for k in CLEAR_LINKS)]
         objects = [g for g in range(model.ngeom) if model.geom_contype[g] and model.geom_bodyid[g] and g not in self.robot_geoms]
         self.clear_pairs = [(g, o) for g in legs for o in objects]
+        self.hip_geoms = {g for g in legs if "hip" in model.body(model.geom_bodyid[g]).name}
         self.effort = profile.effort_limit
         self.q_lo, self.q_hi = model.jnt_range[[model.joint(j).id for j in G1_JOINT_NAMES]].T.copy()
         self._M = np.zeros((model.nv, model.nv))
@@ -229,7 +233,10 @@ class WholeBodyController:
         supported = tau_ext[2] > cfg.other_support * self.robot_mass * 9.81  # sitting, leaning: no stepping logic
         target = self.stepping.adapt(self, d, target) if cfg.contact_stance and not supported else target
         stance = [k for k in range(2) if target.stance[k]]
-        nf = 12 * len(stance)
+        seats = seat.support_points(self, d, self.unseated_geoms) if target.seated else []
+        for sp in seats:  # the QP chooses the seat's force (it is no longer a measured given)
+            tau_ext = tau_ext - sp.tau
+        nf = 12 * len(stance) + 3 * len(seats)
         n = nv + nf
         qd = d.qvel[:nv]
         mujoco.mj_fullM(m, d, self._M)
@@ -300,32 +307,38 @@ class WholeBodyController:
         P[:nv, :nv] += cfg.w_qdd * np.eye(nv)
         P[nv:, nv:] += cfg.w_force * np.eye(nf)
 
-        # contact Jacobians of the stance corners (world frame)
-        Jcorner = np.zeros((nf, nv))
-        for s, k in enumerate(stance):
+        Jc = [np.zeros((0, nv))]  # contact point Jacobians (world frame): the stance feet's sole corners, then the seat's points
+        for k in stance:
             fb = self.feet[k]
             R = d.xmat[fb].reshape(3, 3)
-            for j, p in enumerate(self.corners[k]):
-                jp = np.zeros((3, m.nv))
-                mujoco.mj_jac(m, d, jp, None, d.xpos[fb] + R @ p, fb)
-                Jcorner[12 * s + 3 * j : 12 * s + 3 * j + 3] = jp[:, :nv]
-        A = [np.hstack([M[:6], -Jcorner[:, :6].T])]
-        b = [-h[:6] + tau_ext[:6]]
-        for J6, a in (Jfeet[k] for k in stance):
-            A.append(np.hstack([J6, np.zeros((6, nf))]))
-            b.append(a)
-        A, b = np.vstack(A), np.concatenate(b)
+            for p in self.corners[k]:
+                Jc.append(self._jac(d, fb, d.xpos[fb] + R @ p)[0])
+        A, b = [], []
+        for k in stance:
+            A.append(np.hstack([Jfeet[k][0], np.zeros((6, nf))]))
+            b.append(Jfeet[k][1])
+        for sp in seats:  # a seat's support point is held like a stance foot, softly (held hard with the feet and the torque bounds, the QP was infeasible)
+            jp, _, bp, _ = self._jac(d, sp.body, sp.point)
+            Jc.append(jp)
+            task(jp, -cfg.stance_kv * (jp @ qd) - bp, cfg.w_seat)
+        Jc = np.vstack(Jc)
+        A, b = np.vstack([np.hstack([M[:6], -Jc[:, :6].T])] + A), np.concatenate([-h[:6] + tau_ext[:6]] + b)
+        mu = cfg.mu / np.sqrt(2.0)  # the pyramid inscribed in the cone: |f_t| <= mu f_n in every direction
+        frames = [np.array([[0, 0, 1.0], [1, 0, 0], [0, 1, 0]])] * (4 * len(stance)) + [sp.frame for sp in seats]
         G, hv = [], []
-        nc = nf // 3
-        mu = cfg.mu / np.sqrt(2.0)  # the pyramid inscribed in the cone: |f_t| <= mu f_z in every direction
-        cone = np.array([[1, 0, -mu], [-1, 0, -mu], [0, 1, -mu], [0, -1, -mu], [0, 0, -1.0]])
-        if nc:
-            Gc = np.zeros((5 * nc, n))
-            for j in range(nc):
-                Gc[5 * j : 5 * j + 5, nv + 3 * j : nv + 3 * j + 3] = cone
+        if frames:
+            Gc = np.zeros((5 * len(frames), n))
+            for j, (fn, t1, t2) in enumerate(frames):
+                Gc[5 * j : 5 * j + 5, nv + 3 * j : nv + 3 * j + 3] = [t1 - mu * fn, -t1 - mu * fn, t2 - mu * fn, -t2 - mu * fn, -fn]
             G.append(Gc)
-            hv.append(np.zeros(5 * nc))
-        Tq = np.hstack([M[6:], -Jcorner[:, 6:].T])  # tau = Tq x + h_a - tau_ext_a
+            hv.append(np.zeros(5 * len(frames)))
+        if seats and cfg.seated_foot_load > 0:  # seated, each stance foot still carries a share of the weight (else the robot tipped back, feet in the air)
+            Gf = np.zeros((len(stance), n))
+            for s in range(len(stance)):
+                Gf[s, nv + 12 * s + 2 : nv + 12 * s + 12 : 3] = -1.0
+            G.append(Gf)
+            hv.append(np.full(len(stance), -cfg.seated_foot_load * self.robot_mass * 9.81))
+        Tq = np.hstack([M[6:], -Jc[:, 6:].T])  # tau = Tq x + h_a - tau_ext_a
         ta = h[6:] - tau_ext[6:]
         G += [Tq, -Tq]
         hv += [cfg.effort_scale * self.effort - ta, cfg.effort_scale * self.effort + ta]

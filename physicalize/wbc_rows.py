@@ -62,13 +62,13 @@ def soft_rows(ctrl, d, target, stance: list[int]) -> tuple[np.ndarray, np.ndarra
                 Gs.append(-jp[2])
                 hs.append(bp[2] - bound)
     if cfg.clearance_rate > 0 and ctrl.clear_pairs:
-        G, h = clearance_rows(ctrl, d)
+        G, h = clearance_rows(ctrl, d, seated=target.seated)
         Gs += G
         hs += h
     return np.array(Gs).reshape(-1, nv), np.array(hs)
 
 
-def clearance_rows(ctrl, d) -> tuple[list, list]:
+def clearance_rows(ctrl, d, seated: bool = False) -> tuple[list, list]:
     """Rows that keep the legs off the objects (``ctrl.clear_pairs``: leg geom, object geom).
 
     For a pair closer than ``clearance + clearance_zone`` with signed distance ``d`` (``mj_geomDistance``),
@@ -76,12 +76,15 @@ def clearance_rows(ctrl, d) -> tuple[list, list]:
     ``ddd = -n^T (J_p qdd + Jdot_p qd)`` (the object taken at rest), the same critically damped barrier as
     the joint ranges, ``ddd + 2 a dd + a^2 max(d - clearance, 0) >= 0`` (``a`` = ``clearance_rate``):
     ``n^T J_p qdd <= -n^T Jdot_p qd + 2 a dd + a^2 max(d - clearance, 0)``. Inside the clearance (a leg
-    that starts next to the object) the row only brakes the approach: pushing it out kicked the robot over."""
+    that starts next to the object) the row only brakes the approach: pushing it out kicked the robot over.
+    While ``seated`` the hips may rest on an object (their pairs get no row): the seat carries the thighs."""
     cfg, m = ctrl.cfg, ctrl.m
     a, reach = cfg.clearance_rate, cfg.clearance + cfg.clearance_zone
     Gs, hs = [], []
     fromto = np.zeros(6)
     for g, o in ctrl.clear_pairs:
+        if seated and g in ctrl.hip_geoms:
+            continue
         if np.linalg.norm(d.geom_xpos[g] - d.geom_xpos[o]) - m.geom_rbound[g] - m.geom_rbound[o] > reach:
             continue
         dist = mujoco.mj_geomDistance(m, d, g, o, reach, fromto)

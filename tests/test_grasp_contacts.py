@@ -129,17 +129,3 @@ def test_a_two_hand_grip_lies_on_one_line_over_the_centre_of_mass(scene):
         r = p[k] - axis
         assert np.linalg.norm(r - (r @ n) * n) < 1e-6
     assert g.friction_ok.all() and np.allclose(g.force[t].sum(axis=0), 0.0, atol=1e-6)  # resting: squeezes cancel
-
-
-def test_seat_ramp_follows_the_pelvis_labels():
-    """The seat share of the CoM plan: off by default; with ``seat_share`` 1 it is 1 on the labelled seat frames,
-    ramps in over ``seat_ramp_frames`` before them and out ``seat_release_lag`` after them."""
-    from physicalize.grasp import seat_ramp
-
-    labels = np.zeros((120, 3), bool)
-    labels[40:80, 0] = True
-    assert seat_ramp(LINKS, labels, 120) is None
-    cfg = GraspConfig(seat_share=1.0, seat_ramp_frames=10, seat_release_lag=10)
-    s = seat_ramp(LINKS, labels, 120, cfg)
-    assert (s[40:80] == 1.0).all() and s[30] == 0.0 and 0 < s[35] < 1 and s[90] == 0.0 and 0 < s[85] < 1
-    assert seat_ramp(LINKS, labels & False, 120, cfg) is None
