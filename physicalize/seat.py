@@ -38,8 +38,6 @@ if TYPE_CHECKING:
 
 NV_ROBOT = 6 + NUM_JOINTS
 SUPPORT_NORMAL_Z = np.cos(np.pi / 4)  # a contact whose normal is this close to vertical supports from below
-
-
 SEAT_LINKS = ("pelvis", "left_hip_pitch_link", "left_hip_roll_link", "left_hip_yaw_link", "right_hip_pitch_link", "right_hip_roll_link", "right_hip_yaw_link")
 MAX_SEAT_POINTS = len(SEAT_LINKS)
 
