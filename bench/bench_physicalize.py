@@ -10,7 +10,8 @@ is present, the OMOMO box clip, the InterMimic table clip and the PyMO walk. Eac
 retargeted (not timed), then physicalized by :func:`physicalize.stage.physicalize_clip` (timed:
 scene build, reference, plan and closed-loop tracking on one core). ``rt`` is simulated seconds
 per wall second, ``rt/core`` per CPU second (robust to a shared, loaded machine: everything runs on one
-thread); the issue's bar is >= 5 per core.
+thread); the issue's bar is >= 5 per core. ``ref tau``: the largest static torque the tracked reference asks of an
+upper-body motor, as a fraction of its limit (:mod:`physicalize.static_torque`).
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
 REAL = ["omomo/sub3_largebox_003.pt", "intermimic/sub2_largetable_000.pt", "bvh/pymo_walk_120hz.bvh"]
 COLUMNS = [("valid", "valid"), ("fell", "fell"), ("frames_simulated", "sim/ref"), ("mpjpe_m", "mpjpe"), ("root_pos_err_max_m", "root max"),
            ("foot_slide_frac_1cm_per_frame", "slide"), ("penetration_max_m", "pen max"), ("torque_saturation_frac", "sat"),
-           ("object_pos_err_m", "obj err"), ("realtime_factor", "rt"), ("realtime_factor_per_core", "rt/core")]  # fmt: skip
+           ("object_pos_err_m", "obj err"), ("reference_static_torque_ratio_max", "ref tau"), ("realtime_factor", "rt"),
+           ("realtime_factor_per_core", "rt/core")]  # fmt: skip
 
 
 def _clips():

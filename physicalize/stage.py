@@ -139,6 +139,7 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
     """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
     ``reference`` (see :func:`tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`)."""
     from physicalize.rollout import initial_state, replay, simulate
+    from physicalize.static_torque import static_torque_figures
     from physicalize.validate import validate
     from physicalize.wbc import WholeBodyController
 
@@ -152,6 +153,8 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
     roll.seconds = time.perf_counter() - t0  # planning + tracking
     cpu = time.process_time() - cpu0
     figures = validate(scene, roll, clip.qpos, objects)
+    loads = None if ref.grasp is None else (ref.grasp.offset, ref.grasp.force)
+    figures.update(static_torque_figures(ref.qpos, loads, scene.profile.effort_limit, clip.fps))  # what the reference asks of the upper body
     figures["realtime_factor_per_core"] = roll.frames / clip.fps / max(cpu, 1e-9)  # CPU time of this (single-threaded) process
     qs, _ = replay(scene.model, qpos0, qvel0, roll.action)
     figures["replay_err_max_m"] = float(np.abs(np.vstack([qs[:-1] - roll.qpos, qs[-1:] - roll.final_qpos])).max())
