@@ -50,7 +50,7 @@ from pipeline.errors import InputError, first_bad_frame
 from pipeline.robot import default_qpos
 from pipeline.scene import Scene
 from pipeline.ik_limits import FloorLimit, FrameVelocityLimit, SeparationLimit
-from retarget.contact import ContactTask, FootClearance, contact_ramp
+from retarget.contact import ContactTask, FootClearance, contact_ramp, hold_resting
 from retarget.ik_config import (
     FOOT_BODIES,
     IKConfig,
@@ -145,6 +145,9 @@ class G1Retargeter:
             if not np.isfinite(q).all():
                 raise InputError(source, "qpos", "IK diverged (non-finite joint positions)", frame=t)
             out[t] = q
+        if clearance is not None:  # a resting object does not slide: each rest takes its final offset
+            for name in self.objects_pose:
+                self.objects_pose[name] = hold_resting(objects_pose[name], self.objects_pose[name], targets.fps)
         dt = time.perf_counter() - t0
         self.stats = {"frames": T, "qp_solves": solves, "relaxed_steps": self._relaxed_steps, "failed_steps": self._failed_steps,
                       "seconds": dt, "frames_per_s": T / dt if dt > 0 else float("inf")}  # fmt: skip

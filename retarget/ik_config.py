@@ -68,8 +68,9 @@ class IKConfig:
     :class:`~retarget.contact.ContactTask` (cost ``contact_cost``, faded in and out over
     ``contact_ramp_s``) drives its distance to the objects to ``contact_gap`` (links farther than
     ``contact_reach`` are left alone). A moving object within ``clearance_margin`` of a planted
-    foot is moved away horizontally at up to ``clearance_speed`` [m/s] and stays moved
-    (:class:`~retarget.contact.FootClearance`); ``G1Retargeter.objects_pose`` holds the result.
+    foot is moved away horizontally at up to ``clearance_speed`` [m/s] and stays moved; an object at
+    rest in the input stands still where it ends up (:class:`~retarget.contact.FootClearance`,
+    :func:`~retarget.contact.hold_resting`); ``G1Retargeter.objects_pose`` holds the result.
     """
 
     solver: str = "daqp"

@@ -1,4 +1,4 @@
-"""Object contact for the retarget IK (retarget/contact.py): link flags, the fade ramp, ContactTask."""
+"""Object contact for the retarget IK (retarget/contact.py): link flags, the fade ramp, ContactTask, resting objects."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pipeline.default_input import default_clips
 from pipeline.geometry import Primitive
 from pipeline.robot import default_qpos
 from pipeline.scene import SceneObject, build_scene, link_collision_geoms
-from retarget.contact import ContactTask, contact_ramp, link_contact_flags
+from retarget.contact import ContactTask, contact_ramp, hold_resting, link_contact_flags
 from retarget.ik_config import object_collision_geoms
 
 WRIST = "right_wrist_yaw_link"
@@ -92,3 +92,27 @@ def test_rejects_a_gap_beyond_reach():
     scene = _scene_with_box(0.08)
     with pytest.raises(ValueError, match="gap"):
         ContactTask(scene.model, (WRIST,), object_collision_geoms(scene.model, scene), gap=0.5, reach=0.3)
+
+
+def test_a_resting_object_takes_the_offset_its_rest_ends_with():
+    """Rest 0-19, carried 20-39, rest 40-59; clearance offsets that grow inside the rests: each rest
+    (with the frame it arrives on) holds its last offset, the carried frames keep theirs."""
+    fps, T = 50.0, 60
+    p_in = np.zeros((T, 7))
+    p_in[:, 3] = 1.0
+    p_in[20:40, 0] = np.linspace(0.02, 0.4, 20)
+    p_in[40:, 0] = 0.4
+    off = np.zeros((T, 3))
+    off[5:15, 1] = np.linspace(0.002, 0.02, 10)  # pushed while resting (an approaching foot)
+    off[15:, 1] = 0.02
+    off[25:, 1] += 0.01  # pushed while carried
+    off[45:50, 0] = np.linspace(0.004, 0.02, 5)  # pushed after it was set down
+    off[50:, 0] = 0.02
+    p_out = p_in.copy()
+    p_out[:, :3] += off
+    held = hold_resting(p_in, p_out, fps)
+    np.testing.assert_allclose(held[:20, :3] - p_in[:20, :3], np.tile([0.0, 0.02, 0.0], (20, 1)))  # never slides before its first move
+    np.testing.assert_allclose(held[20:39], p_out[20:39])  # moving frames keep their offsets
+    np.testing.assert_allclose(held[39:], np.tile(held[-1], (21, 1)))  # stands still from the frame it arrives at rest
+    np.testing.assert_allclose(held[-1, :3], p_in[-1, :3] + off[-1])
+    np.testing.assert_array_equal(held[:, 3:], p_in[:, 3:])

@@ -272,3 +272,23 @@ def test_box_set_down_onto_a_planted_toe_gives_way(plain):
     np.testing.assert_allclose(shift[-5:], np.repeat(shift[-1:], 5, axis=0))  # and settles once it rests
     assert np.linalg.norm(np.diff(shift, axis=0), axis=-1).max() <= 1.0 / FPS + 1e-9  # at most clearance_speed
     np.testing.assert_array_equal(moved[:, 2:], box[:, 2:])  # heights and orientations untouched
+
+
+def test_a_resting_box_at_a_planted_toe_stands_still_where_it_is_moved(plain):
+    """A box standing on the floor over the right toe from the first frame: it is placed clear of the
+    toe on every frame (it does not slide away while nobody touches it; a physics box cannot)."""
+    T = 40
+    q_true = np.repeat(default_qpos(plain.profile)[None], T, axis=0)
+    targets = targets_from_qpos(plain.model, q_true, G1_LINK_NAMES, FPS, foot_contact=np.ones((T, 2), bool))
+    d = mujoco.MjData(plain.model)
+    d.qpos[:36] = q_true[0]
+    mujoco.mj_kinematics(plain.model, d)
+    toe = d.site_xpos[plain.model.site("right_foot").id] + [0.12, 0.0, 0.0]
+    box = np.tile([toe[0] + 0.05, toe[1], 0.08, 1.0, 0.0, 0.0, 0.0], (T, 1))  # back face 3 cm behind the toe tip
+    scene = build_scene([SceneObject("box", Primitive("box", (0.08, 0.08, 0.08)), pose=tuple(box[0]))])
+    ik = G1Retargeter(scene, IKConfig())
+    q = ik.retarget(targets, {"box": box})
+    placed = ik.objects_pose["box"]
+    assert placed[0, 0] - box[0, 0] > 0.02  # moved forward, away from the foot ...
+    np.testing.assert_allclose(placed, np.tile(placed[0], (T, 1)))  # ... from the first frame on, and never slides
+    assert contacts(scene, q, {"box": placed})["object"] > -0.002
