@@ -28,7 +28,7 @@ Tasks and phases (seconds; the seed only moves the objects by a few cm, so the t
 for every seed to within a frame; exact values in :attr:`SyntheticDemo.phases`; consecutive
 phases may overlap, never leave gaps):
 
-* **PickUp** (7.9 s; box 0.4 x 0.3 x 0.3 m, 3 kg, ~1.97 m ahead): stand 0-0.3, approach 0.3-2.6
+* **PickUp** (7.9 s; box 0.4 x 0.3 x 0.3 m, 1.5 kg, ~1.97 m ahead): stand 0-0.3, approach 0.3-2.6
   (1.5 m, 3 steps + closing step), squat_reach 2.6-3.6 (pelvis 0.92 -> 0.45 m, trunk ~60 deg,
   hands reach the side faces), grasp 3.6-3.85, lift 3.85-4.85 (box to waist, centre 0.95 m),
   hold 4.85-7.85 (held 3 s).

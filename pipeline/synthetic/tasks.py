@@ -12,7 +12,11 @@ from pipeline.synthetic.skeleton import PELVIS_FWD
 SMALL_BOX = Primitive("box", (0.20, 0.15, 0.15))  # 0.4 x 0.3 x 0.3 m, long axis along the walker
 LARGE_BOX = Primitive("box", (0.30, 0.30, 0.60))  # 0.6 x 0.6 x 1.2 m cabinet-like box
 CHAIR = Chair()  # seat top 0.45 m
-SMALL_BOX_MASS, LARGE_BOX_MASS, CHAIR_MASS = 3.0, 20.0, 6.0
+SMALL_BOX_MASS, LARGE_BOX_MASS, CHAIR_MASS = 1.5, 20.0, 6.0
+# The lifted box is as heavy as the G1 can lift it this way: the static torque the lift asks of the
+# waist pitch motor (50 N m; physicalize.static_torque, the grasp's loads) is 0.87 / 0.93 / 1.00 / 1.07 / 1.14
+# of its limit at 1 / 1.5 / 2 / 2.5 / 3 kg, and the physicalized PickUp held the box up to 1.5 kg and
+# lost it in the lift from 2 kg on.
 # The pushed box stands on furniture sliders: pushed at 1.10 m it slides at mu m g = 29 N; it tips about
 # its far bottom edge at m g (0.30 m) / (1.10 m) = 54 N (with the default friction 0.8 it would tip long
 # before sliding at 157 N, which makes the demonstration physically impossible).
