@@ -70,6 +70,8 @@ class WBCConfig:
     foot_kd: float = 40.0
     hand_kp: float = 100.0
     hand_kd: float = 20.0
+    hold_kp: float = 300.0  # a hand holding an object (omomo box lost at 2.64 s with hand_kp: the hands slid 5-15 cm up and down its faces; kept to 3.2 s with these)
+    hold_kd: float = 35.0
     posture_kp: float = 100.0
     posture_kd: float = 20.0
     swing_ff: float = 1.0  # feed-forward of the reference swing-foot acceleration
@@ -286,12 +288,14 @@ class WholeBodyController:
                 p = d.xpos[hb] + d.xmat[hb].reshape(3, 3) @ off[k]
                 Jp, Jr, bp, br = self._jac(d, hb, p)
                 goal = target.hand_pos[k]
-                if target.hand_hold_body is not None and target.hand_hold_body[k] >= 0:  # follow a lagging object, pull it back at most hand_lead
+                holding = target.hand_hold_body is not None and target.hand_hold_body[k] >= 0
+                kp, kd = (cfg.hold_kp, cfg.hold_kd) if holding else (cfg.hand_kp, cfg.hand_kd)
+                if holding:  # follow a lagging object, pull it back at most hand_lead
                     dev = d.xpos[int(target.hand_hold_body[k])] - target.hand_hold_ref[k]
                     nd = float(np.linalg.norm(dev))
                     if nd > cfg.hand_lead:
                         goal = goal + dev * (1.0 - cfg.hand_lead / nd)
-                a = ha[k] + cfg.hand_kp * (goal - p) + cfg.hand_kd * (hv[k] - Jp @ qd)
+                a = ha[k] + kp * (goal - p) + kd * (hv[k] - Jp @ qd)
                 task(Jp, a - bp, cfg.w_hand if target.hand_weight is None else float(target.hand_weight[k]))
                 if target.hand_rot is not None and target.hand_rot_weight[k] > 0:
                     err = orientation_error(target.hand_rot[k], d.xmat[hb].reshape(3, 3))
