@@ -86,6 +86,7 @@ class FeasibleConfig:
     exact_stance: bool = True  # stance feet as equality constraints (else high-cost tasks)
     min_knee: float = 0.1  # rad: the re-solved knees bend at least this much (no straight-leg singularity)
     footstep_tolerance: float = 0.02  # m: a stance frame's reference foot this close to its footstep is planted
+    swing_clearance: float = 0.04  # m: a reference swing whose sole stays lower is lifted to this at mid-swing, level (foot_targets; 0: off). omomo: fell at 3.74 s -> valid; 0.05 also lifts SitStand's turning steps (4-5 cm) and its stand-up then fails
     self_collision: bool = True  # robot self-collision avoidance (the retargeter's SeparationLimit): a CoM shift must not put a hand into a thigh
     self_min_distance: float = 0.005  # m
     object_collision: bool = True  # robot vs object avoidance, with the objects at their reference poses (when given)
@@ -136,8 +137,13 @@ class FootTargets:
     planted: np.ndarray  # (T, 2) bool, a subset of the reference's stance
 
 
-def foot_targets(ref: Reference, sole_z: np.ndarray, tolerance: float = 0.02) -> FootTargets:
+def foot_targets(ref: Reference, sole_z: np.ndarray, tolerance: float = 0.02, clearance: float = 0.0) -> FootTargets:
     """Footsteps in stance, the reference plus a blended footstep offset elsewhere (module docstring).
+
+    With ``clearance > 0`` a foot swinging between two footsteps (the reference's schedule) is level (its
+    blended heading, no pitch or roll: the tracker lands feet flat) and its sole at least ``clearance sin^2(pi s)`` above the floor (``s``: 0 -> 1 from the frame before the swing to the
+    frame after it): a human's toe-off and heel-strike swings keep the pitched G1 sole 0.5-2 cm off the
+    floor, and a flat foot that low scuffs and lands early.
 
     ``sole_z[k]``: the sole's height in foot ``k``'s body frame (negative), so a flat foot on the floor
     has its origin at ``-sole_z``. A stance run's footstep holds over its **planted** frames: the
@@ -178,6 +184,14 @@ def foot_targets(ref: Reference, sole_z: np.ndarray, tolerance: float = 0.02) ->
             alpha = ((frames - (a0 - 1)) / (a1 - a0 + 1))[:, None]  # 0 at the last planted frame, 1 at the next
             pos[frames, k] = ref.foot_pos[frames, k] + (1 - alpha) * d0[0] + alpha * d1[0]
             quat[frames, k] = _wxyz(Rotation.from_rotvec((1 - alpha) * d0[1] + alpha * d1[1]) * ref_rot[frames])
+            if clearance > 0 and before is not None and after is not None:
+                for s, e in runs(~ref.stance[a0:a1, k]):  # the swings in between that stay low
+                    sw = np.arange(a0 + s, a0 + e)
+                    if ref.sole_height[sw, k].max() >= clearance:
+                        continue
+                    quat[sw, k] = [_wxyz(_yaw_rotation(q)) for q in quat[sw, k]]
+                    lift = clearance * np.sin(np.pi * (sw - (a0 + s - 1)) / (e - s + 1)) ** 2
+                    pos[sw, k, 2] = np.maximum(pos[sw, k, 2], -sole_z[k] + lift)
     return FootTargets(pos, quat, planted)
 
 
@@ -265,7 +279,7 @@ class ReferenceIK:
         self._objects_on = objects is not None and bool(self.object_limit)
         T = ref.frames
         t0 = time.perf_counter()
-        feet = self.foot_targets = foot_targets(ref, self.sole_z, cfg.footstep_tolerance)
+        feet = self.foot_targets = foot_targets(ref, self.sole_z, cfg.footstep_tolerance, cfg.swing_clearance)
         links = self._reference_poses(ref.qpos)
         seat = None if ref.seat is None else self._reference_poses(ref.qpos, self.seat_ids)
         if hand_targets is not None:

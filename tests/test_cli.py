@@ -123,7 +123,9 @@ def test_retarget_rerun_on_the_same_input_does_nothing(tmp_path, monkeypatch, ca
 
 @needs_shared
 @pytest.mark.slow
-def test_folder_input_with_object(tmp_path, monkeypatch):
+def test_omomo_folder_is_retargeted_and_physicalized_valid(tmp_path, monkeypatch):
+    """The OMOMO box clip end to end through the CLI: a folder input with its object mesh, retargeted,
+    then physicalized (feasible reference, base teacher) into a valid episode."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path))
@@ -132,6 +134,13 @@ def test_folder_input_with_object(tmp_path, monkeypatch):
     assert ds.num_episodes == 1 and ds.num_frames == 196
     robot = LeRobotDataset("lessmimic/omomo-retargeted", root=tmp_path / "omomo" / "retargeted")
     assert robot.num_episodes == 1 and robot.fps == 50
+    # the physicalize stage: the box is picked up and carried in MuJoCo with the base teacher, and is valid
+    assert main(["physicalize", "--name", "omomo"]) == 0
+    report = json.loads((tmp_path / "omomo" / "physicalized" / "report.json").read_text())
+    (clip,) = report["clips"]
+    assert clip["valid"], clip["reason"]
+    assert clip["frames_simulated"] == clip["frames"] and clip["object_pos_err_m"] < 0.1 and clip["replay_err_max_m"] <= 1e-6
+    assert LeRobotDataset("lessmimic/omomo-physicalized", root=tmp_path / "omomo" / "physicalized").num_episodes == 1
 
 
 @needs_shared

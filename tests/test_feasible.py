@@ -139,6 +139,31 @@ def test_footsteps_from_a_sliding_stance_foot(scene):
     assert np.linalg.norm(np.diff(ft.pos[:, 0], axis=0), axis=-1).max() < 0.02
 
 
+def test_a_low_pitched_swing_is_lifted_and_levelled(scene):
+    """A human-like shuffle: the left foot swings 30 cm with its toe pitched down and its sole at most
+    1 cm up; its targets rise to the clearance at mid-swing, level. The right foot's 7 cm swing is kept."""
+    T, a, b = 60, 20, 40
+    ref = _standing_reference(scene, T)
+    s = (np.arange(a, b) - (a - 1)) / (b - a + 1)
+    for k, (lift, pitch) in enumerate(((0.01, 0.35), (0.07, 0.0))):
+        ref.stance[a:b, k] = False
+        ref.foot_pos[a:b, k, 0] += 0.3 * s
+        ref.foot_pos[b:, k, 0] += 0.3
+        ref.foot_pos[a:b, k, 2] += lift * np.sin(np.pi * s) ** 2
+        ref.sole_height[a:b, k] = lift * np.sin(np.pi * s) ** 2
+        ref.foot_quat[a:b, k] = [np.cos(pitch / 2), 0.0, np.sin(pitch / 2), 0.0]
+    sole_z = np.array([sole_corners(scene.model, b)[0, 2] for b in ("left_ankle_roll_link", "right_ankle_roll_link")])
+    plain, lifted = foot_targets(ref, sole_z, 0.02), foot_targets(ref, sole_z, 0.02, clearance=0.04)
+    mid = (a + b) // 2
+    assert lifted.pos[mid, 0, 2] + sole_z[0] == pytest.approx(0.04, abs=0.002)  # sole 4 cm up at mid-swing
+    assert plain.pos[mid, 0, 2] + sole_z[0] < 0.015
+    assert np.all(lifted.pos[a:b, 0, 2] >= plain.pos[a:b, 0, 2] - 1e-12)
+    assert np.allclose(lifted.quat[a:b, 0, 1:3], 0.0) and not np.allclose(plain.quat[a:b, 0, 1:3], 0.0)  # level
+    np.testing.assert_array_equal(lifted.pos[:, 1], plain.pos[:, 1])  # a swing that clears the floor is kept
+    np.testing.assert_array_equal(lifted.pos[: a - 1], plain.pos[: a - 1])
+    assert np.linalg.norm(np.diff(lifted.pos[:, 0], axis=0), axis=-1).max() < 0.03  # no jump
+
+
 def test_config_rejects_a_model_without_the_robot_first():
     with pytest.raises(ValueError):
         import mujoco
