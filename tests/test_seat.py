@@ -7,7 +7,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from physicalize.plan import support_polygon
+from physicalize.plan import SEAT_LEAD_S, support_polygon, zmp_reference
 from physicalize.reference import build_reference, place_on_floor
 from physicalize.seat import SEAT_LINKS, SeatConfig, seat_support, support_points
 from physicalize.wbc import WholeBodyController
@@ -79,6 +79,22 @@ def test_support_polygon_takes_in_the_seat_points(near):
     assert both[:, 0].min() == pytest.approx(ref.seat[50, 0, 0])
     assert feet[:, 0].min() > ref.seat[50, 0, 0] + 0.1
     assert np.allclose(np.sort(support_polygon(ref, 49)[:, 0]), np.sort(feet[:, 0]))
+
+
+def test_the_plan_stands_on_the_feet_before_the_seat_lets_go(near):
+    """Seated on frames 40-79 with the CoM 20 cm behind the feet: the ZMP reference follows it onto the seat,
+    except over the last SEAT_LEAD_S of the run, where it is back in the feet's polygon."""
+    scene, q0 = near
+    ref = build_reference(scene.model, np.tile(q0, (T, 1)), 50.0)
+    feet = support_polygon(ref, 50, seat=False)
+    ref.seat = np.full((T, len(SEAT_LINKS), 3), np.nan)
+    ref.seat[40:80, 0] = ref.corners[50].reshape(-1, 3).mean(0) + [-0.3, 0, 0.4]
+    ref.com[40:80, 0] -= 0.2
+    zmp = zmp_reference(ref)
+    lead = int(round(SEAT_LEAD_S * ref.fps))
+    assert lead > 0
+    np.testing.assert_allclose(zmp[40 : 80 - lead], ref.com[40 : 80 - lead, :2])  # on the seat: the CoM's projection
+    assert (zmp[80 - lead : 80, 0] >= feet[:, 0].min() - 1e-9).all()  # the last frames: over the feet
 
 
 def test_support_points_take_the_post_under_the_pelvis():
