@@ -33,15 +33,18 @@ track this module plans, per control frame ``t`` and hand ``k``:
 * **the force the hands must apply.** With the reference object velocity ``v_o`` and acceleration
   ``a_o`` (central differences of its track) and ``lambda(t) = clip((z_o(t) - z_o(t_0)) / lift_blend, 0, 1)``
   (0 while the object rests where the hold started, 1 once lifted), the hands must apply
-  ``F = m [a_o,xy; lambda a_o,z] + lambda m g e_z + (1 - lambda) mu_s m g min(1, |v_xy| / slide_speed) v_xy/|v_xy|``
-  (its inertia, its weight once lifted, its sliding friction on its support while resting; ``mu_s``:
-  the object-floor friction by MuJoCo's mixing rule); a one-side lift carries only
-  :attr:`GraspConfig.side_lift` of the weight (the far side still rests). Each holding hand takes
+  ``F = m [a_o,xy; lambda a_o,z] + lambda m g e_z + r mu_s m g min(1, |v_xy| / slide_speed) v_xy/|v_xy|``
+  (its inertia, its weight once lifted, its sliding friction on its support for the share ``r`` of its
+  weight that still rests there; ``mu_s``: the object-floor friction by MuJoCo's mixing rule); a one-side
+  lift carries only :attr:`GraspConfig.side_lift` of the weight (the far side still rests, and drags:
+  ``r = 1 - side_lift lambda``; between squeezing hands ``r = 1 - lambda``). Each holding hand takes
   ``F_k = F / n_hands``. Squeezing: the part along the surface, ``F_t,k = F_k - (F_k . n_k) n_k``, must come
   from friction, so ``N_k = clip(max(N_min, safety |F_t,k| / mu), 0, N_max)`` and ``f_k = s (N_k n_k + F_k)``.
   Pressing from one side there is no squeeze to cancel: ``N_k = max(F_k . n_k, safety |F_t,k| / mu, 0)``,
   ``f_k = s (F_k + (N_k - F_k . n_k) n_k)`` (exactly ``F_k`` for a push along the normal). ``|f_k|`` is capped
-  at :attr:`GraspConfig.max_hand_force`; ``friction_ok`` records ``mu N_k >= |F_t,k|``. ``mu`` and ``condim`` of a
+  at :attr:`GraspConfig.max_hand_force`; ``friction_ok`` records whether the plan is within friction: squeezing,
+  ``mu N_k >= |F_t,k|`` under the caps; pressing from one side, the force needed itself in the cone,
+  ``mu F_k . n_k >= |F_t,k|`` (a hand that only presses cannot pull: the InterMimic table, dragged towards the body). ``mu`` and ``condim`` of a
   hand-object contact follow MuJoCo's mixing rule (:func:`contact_friction`): the geom with the higher
   ``priority`` decides, else the larger friction and condim; ``condim 1`` (frictionless) cannot hold
   anything and raises.
@@ -72,6 +75,7 @@ from physicalize.target import Target
 from physicalize.wbc import HAND_BODIES, quat_mat
 
 GRAVITY = 9.81
+FRICTION_TOL_N = 0.5  # N: a planned force this far outside a friction cone still counts as inside (resting objects: numerical noise)
 
 
 @dataclass(frozen=True)
@@ -115,7 +119,7 @@ class GraspSchedule:
     grasped: np.ndarray  # (T, 2) bool
     body: np.ndarray  # (T, 2) int: body id of the grasped object, -1 none
     obj: np.ndarray  # (T,) int: index of the grasped object in the object list, -1 none
-    friction_ok: np.ndarray  # (T,) bool: mu N_k >= |F_t,k| for both hands (True when not grasping)
+    friction_ok: np.ndarray  # (T,) bool: the planned forces are within the hands' friction cones (True when not grasping)
     rot: np.ndarray  # (T, 2, 3, 3) reference hand orientations
     rot_weight: np.ndarray  # (T, 2) hand orientation task weight (0 when not grasping)
     mu: float
@@ -183,6 +187,18 @@ def normal_force(load: np.ndarray, n: np.ndarray, mu: float, cfg: GraspConfig) -
     tangential = float(np.linalg.norm(load - (load @ n) * n))
     N = float(np.clip(max(cfg.min_normal_force, cfg.safety * tangential / mu), 0.0, cfg.max_normal_force))
     return N, mu * N >= tangential - 1e-9
+
+
+def press_force(load: np.ndarray, n: np.ndarray, mu: float, cfg: GraspConfig) -> tuple[np.ndarray, bool]:
+    """``(f, ok)``: the force a hand pressing on an object from one side (inward normal ``n``, friction ``mu``)
+    applies for its share ``load`` (3,) of the needed force: ``load`` plus the normal force that makes its
+    tangential part at most ``mu / safety`` of the normal one, ``f = load + (N - load.n) n`` with
+    ``N = max(load.n, safety |load_t| / mu, 0)``; ``ok``: ``load`` itself lies in the friction cone,
+    ``mu load.n >= |load_t|`` (within :data:`FRICTION_TOL_N`): a hand that only presses cannot pull."""
+    push = float(load @ n)
+    tangential = float(np.linalg.norm(load - push * n))
+    N = min(max(push, cfg.safety * tangential / mu, 0.0), cfg.max_hand_force)
+    return load + (N - push) * n, mu * push >= tangential - FRICTION_TOL_N
 
 
 def _label_runs(key: np.ndarray) -> list[tuple[int, int, int]]:
@@ -331,7 +347,8 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
             drag = np.zeros(3)
             if speed > 1e-6:  # sliding on its support: kinetic friction against the motion
                 drag[:2] = floor_mu * mass * GRAVITY * min(1.0, speed / cfg.slide_speed) * v_o[t, :2] / speed
-            F = mass * np.r_[a_o[t, :2], lam[t] * a_o[t, 2]] + lam[t] * mass * GRAVITY * np.array([0, 0, 1.0]) + (1 - lam[t]) * drag
+            rest = 1 - lam[t] if opposed[t] else 1 - cfg.side_lift * lam[t]  # share of its weight still on its support
+            F = mass * np.r_[a_o[t, :2], lam[t] * a_o[t, 2]] + lam[t] * mass * GRAVITY * np.array([0, 0, 1.0]) + rest * drag
             if not opposed[t]:  # lifted from one side only: the far side still rests on its support
                 F[2] -= (1 - cfg.side_lift) * lam[t] * mass * (GRAVITY + a_o[t, 2])
             share = F / len(hands)
@@ -339,11 +356,8 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
                 if opposed[t]:
                     N, ok = normal_force(share, normal[t, k], mu, cfg)
                     f_k = N * normal[t, k] + share
-                else:  # pushing from one side: no squeeze to cancel; the normal part presses at least safety |F_t| / mu
-                    push = float(share @ normal[t, k])
-                    tangential = float(np.linalg.norm(share - push * normal[t, k]))
-                    N = min(max(push, cfg.safety * tangential / mu, 0.0), cfg.max_hand_force)
-                    f_k, ok = share + (N - push) * normal[t, k], mu * N >= tangential - 1e-9
+                else:  # pushing from one side: no squeeze to cancel
+                    f_k, ok = press_force(share, normal[t, k], mu, cfg)
                 nf = np.linalg.norm(f_k)
                 if nf > cfg.max_hand_force:
                     f_k *= cfg.max_hand_force / nf

@@ -140,6 +140,7 @@ def test_omomo_folder_is_retargeted_and_physicalized_valid(tmp_path, monkeypatch
     (clip,) = report["clips"]
     assert clip["valid"], clip["reason"]
     assert clip["frames_simulated"] == clip["frames"] and clip["object_pos_err_m"] < 0.1 and clip["replay_err_max_m"] <= 1e-6
+    assert clip["reference_grasp_outside_friction_frac"] == 0.0  # a squeeze: every planned hand force within friction
     assert LeRobotDataset("lessmimic/omomo-physicalized", root=tmp_path / "omomo" / "physicalized").num_episodes == 1
 
 

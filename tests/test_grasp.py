@@ -10,7 +10,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from physicalize.grasp import GraspConfig, contact_friction, grasp_schedule, hand_geoms, hand_offsets, normal_force
+from physicalize.grasp import GraspConfig, contact_friction, grasp_schedule, hand_geoms, hand_offsets, normal_force, press_force
 from physicalize.reference import build_reference, place_on_floor
 from physicalize.rollout import initial_state, simulate
 from physicalize.wbc import HAND_BODIES, WholeBodyController, orientation_error
@@ -137,6 +137,24 @@ def test_normal_force_carries_the_load_by_friction():
     assert ok and N == cfg.max_normal_force
     N, ok = normal_force(np.array([0.0, 0.0, 50.0]), n, 0.8, cfg)  # mu N_max = 48 N < 50 N: slips
     assert not ok and N == cfg.max_normal_force
+
+
+def test_a_pressing_hand_pushes_and_lifts_but_cannot_pull():
+    """Pressing from one side: a push along the normal is applied as is; a lift from below gets the normal
+    force its friction needs; a drag towards the hand (the InterMimic table: hand on the near edge, normal
+    (0, -0.87, 0.49), table pulled +y while lifted) is outside the cone and flagged."""
+    cfg, mu = GraspConfig(), 0.8
+    n = np.array([1.0, 0.0, 0.0])
+    f, ok = press_force(np.array([20.0, 0.0, 0.0]), n, mu, cfg)
+    assert ok and np.allclose(f, [20.0, 0.0, 0.0])
+    f, ok = press_force(np.array([0.0, 0.0, 10.0]), np.array([0.0, 0.0, 1.0]), mu, cfg)  # from below
+    assert ok and np.allclose(f, [0.0, 0.0, 10.0])
+    f, ok = press_force(np.array([4.0, 3.0, 0.0]), n, mu, cfg)  # push and slide it sideways: more press
+    assert ok and f[0] == pytest.approx(cfg.safety * 3.0 / mu) and f[1] == pytest.approx(3.0)
+    assert not press_force(np.array([-5.0, 0.0, 0.0]), n, mu, cfg)[1]  # a pull
+    edge = np.array([0.0, -0.87, 0.49]) / np.linalg.norm([0.0, -0.87, 0.49])
+    f, ok = press_force(np.array([0.0, 3.9, 4.9]), edge, mu, cfg)
+    assert not ok and f[1] < 0  # what it can do instead pushes the table away
 
 
 def test_schedule_squeezes_opposite_sides_of_the_box(scene):
