@@ -11,7 +11,8 @@ retargeted (not timed), then physicalized by :func:`physicalize.stage.physicaliz
 scene build, reference, plan and closed-loop tracking on one core). ``rt`` is simulated seconds
 per wall second, ``rt/core`` per CPU second (robust to a shared, loaded machine: everything runs on one
 thread); the issue's bar is >= 5 per core. ``ref tau``: the largest static torque the tracked reference asks of an
-upper-body motor, as a fraction of its limit (:mod:`physicalize.static_torque`).
+upper-body motor, as a fraction of its limit (:mod:`physicalize.static_torque`); ``grip out``: the share of held frames
+whose planned hand forces leave the hands' friction cones (:func:`physicalize.grasp.press_force`).
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
 REAL = ["omomo/sub3_largebox_003.pt", "intermimic/sub2_largetable_000.pt", "bvh/pymo_walk_120hz.bvh"]
 COLUMNS = [("valid", "valid"), ("fell", "fell"), ("frames_simulated", "sim/ref"), ("mpjpe_m", "mpjpe"), ("root_pos_err_max_m", "root max"),
            ("foot_slide_frac_1cm_per_frame", "slide"), ("penetration_max_m", "pen max"), ("torque_saturation_frac", "sat"),
-           ("object_pos_err_m", "obj err"), ("reference_static_torque_ratio_max", "ref tau"), ("realtime_factor", "rt"),
+           ("object_pos_err_m", "obj err"), ("reference_static_torque_ratio_max", "ref tau"),
+           ("reference_grasp_outside_friction_frac", "grip out"), ("realtime_factor", "rt"),
            ("realtime_factor_per_core", "rt/core")]  # fmt: skip
 
 

@@ -18,7 +18,9 @@ not, with the time it first failed where that has one ("fell at t=3.24 s", "obje
 * ``object_pos_err_m`` / ``object_rot_err_rad`` -- mean error vs the reference object track;
 * ``fell``, ``realtime_factor`` (simulated seconds per wall second on one core; the stage adds
   ``realtime_factor_per_core``: per CPU second, robust to a loaded machine, and the tracked
-  reference's ``reference_static_torque_*``, :mod:`physicalize.static_torque`: not a bar, a cause).
+  reference's ``reference_static_torque_*``, :mod:`physicalize.static_torque`, and
+  ``reference_grasp_outside_friction_frac``, the held frames whose planned hand forces leave the hands'
+  friction cones, :func:`physicalize.grasp.press_force`: not bars, causes).
 """
 
 from __future__ import annotations
