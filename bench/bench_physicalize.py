@@ -12,7 +12,8 @@ scene build, reference, plan and closed-loop tracking on one core). ``rt`` is si
 per wall second, ``rt/core`` per CPU second (robust to a shared, loaded machine: everything runs on one
 thread); the issue's bar is >= 5 per core. ``ref tau``: the largest static torque the tracked reference asks of an
 upper-body motor, as a fraction of its limit (:mod:`physicalize.static_torque`); ``grip out``: the share of held frames
-whose planned hand forces leave the hands' friction cones (:func:`physicalize.grasp.press_force`).
+whose planned hand forces leave the hands' friction cones (:func:`physicalize.grasp.press_force`). First, a robustness table:
+per default task, the valid count over ``--seeds`` synthetic seeds (each moves the objects a few cm).
 """
 
 from __future__ import annotations
@@ -61,10 +62,27 @@ def _cell(key, f) -> str:
     return f"{v:.3f}"
 
 
+def _seed_table(n: int) -> None:
+    """Per default task, on how many of the synthetic seeds ``0..n-1`` (each moves the objects a few cm) the
+    clip is valid with the feasible reference and the base teacher, and the reasons of the others."""
+    counts: dict[str, list] = {}
+    for seed in range(n):
+        for c in default_clips(seed=seed):
+            _, _, f, _ = physicalize_clip(retarget_clip(c)[0])
+            counts.setdefault(c.task, []).append((seed, f))
+    print(f"robustness over synthetic seeds 0-{n - 1} (feasible reference, base teacher):")
+    for task, runs in counts.items():
+        bad = [f"seed {s}: {f['reason'][:50]}" for s, f in runs if not f["valid"]]
+        print(f"  {task:9s} valid {sum(f['valid'] for _, f in runs)}/{len(runs)}" + (f"  ({'; '.join(bad[:3])}{' ...' if len(bad) > 3 else ''})" if bad else ""), flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--residual-iterations", type=int, default=50, help="PPO iterations (x 16 envs) of the smoke residual per clip; 0: skip")
+    ap.add_argument("--seeds", type=int, default=10, help="synthetic seeds 0..N-1 of the robustness table (feasible reference, base teacher); 0: skip")
     args = ap.parse_args()
+    if args.seeds:
+        _seed_table(args.seeds)
     print(f"{'clip':24s}{'reference':14s}" + "".join(f"{h:>10s}" for _, h in COLUMNS) + "  reason")
     kinds = [*REFERENCES, *(["feasible+res"] if args.residual_iterations else [])]
     valid = {k: [] for k in kinds}
