@@ -86,7 +86,7 @@ class FeasibleConfig:
     exact_stance: bool = True  # stance feet as equality constraints (else high-cost tasks)
     min_knee: float = 0.1  # rad: the re-solved knees bend at least this much (no straight-leg singularity)
     footstep_tolerance: float = 0.02  # m: a stance frame's reference foot this close to its footstep is planted
-    swing_clearance: float = 0.04  # m: a reference swing whose sole stays lower is lifted to this at mid-swing, level (foot_targets; 0: off). omomo: fell at 3.74 s -> valid; 0.05 also lifts SitStand's turning steps (4-5 cm) and its stand-up then fails
+    swing_clearance: float = 0.04  # m: a reference swing whose sole stays lower is lifted to this at mid-swing, level (foot_targets; 0: off). omomo: fell at 3.74 s -> valid; 0.05 also lifts SitStand's turning steps (still valid) and the PyMO walk then fell at 1.44 s instead of 2.50 s
     self_collision: bool = True  # robot self-collision avoidance (the retargeter's SeparationLimit): a CoM shift must not put a hand into a thigh
     self_min_distance: float = 0.005  # m
     object_collision: bool = True  # robot vs object avoidance, with the objects at their reference poses (when given)
@@ -140,10 +140,12 @@ class FootTargets:
 def foot_targets(ref: Reference, sole_z: np.ndarray, tolerance: float = 0.02, clearance: float = 0.0) -> FootTargets:
     """Footsteps in stance, the reference plus a blended footstep offset elsewhere (module docstring).
 
-    With ``clearance > 0`` a foot swinging between two footsteps (the reference's schedule) is level (its
-    blended heading, no pitch or roll: the tracker lands feet flat) and its sole at least ``clearance sin^2(pi s)`` above the floor (``s``: 0 -> 1 from the frame before the swing to the
-    frame after it): a human's toe-off and heel-strike swings keep the pitched G1 sole 0.5-2 cm off the
-    floor, and a flat foot that low scuffs and lands early.
+    With ``clearance > 0`` a foot swinging between two footsteps (the reference's schedule) whose sole
+    never rises ``clearance`` above the floor is made level (its blended heading, no pitch or roll: the
+    tracker lands feet flat), with its sole at least ``clearance sin^2(pi s)`` above the floor (``s``:
+    0 -> 1 from the frame before the swing to the frame after it): a human's toe-off and heel-strike
+    swings keep the pitched G1 sole 0.5-2 cm off the floor, and a flat foot that low scuffs and lands
+    early. Swings that clear it are left as they are.
 
     ``sole_z[k]``: the sole's height in foot ``k``'s body frame (negative), so a flat foot on the floor
     has its origin at ``-sole_z``. A stance run's footstep holds over its **planted** frames: the

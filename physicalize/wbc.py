@@ -70,7 +70,7 @@ class WBCConfig:
     foot_kd: float = 40.0
     hand_kp: float = 100.0
     hand_kd: float = 20.0
-    hold_kp: float = 300.0  # a hand holding an object (omomo box lost at 2.64 s with hand_kp: the hands slid 5-15 cm up and down its faces; kept to 3.2 s with these)
+    hold_kp: float = 300.0  # a hand holding an object (omomo box lost at 2.64 s with hand_kp: the hands slid 5-15 cm up and down its faces; held to 3.56 s with these, and to the end with the feasible swing clearance)
     hold_kd: float = 35.0
     posture_kp: float = 100.0
     posture_kd: float = 20.0
