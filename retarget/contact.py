@@ -17,6 +17,7 @@ import numpy as np
 from mink.limits.collision_avoidance_limit import compute_contact_normal_jacobian
 
 from pipeline.clip import HumanClip
+from pipeline.foot_contact import runs
 from pipeline.scene import link_collision_geoms, nearest_geom_pair
 
 
@@ -184,15 +185,7 @@ def hold_resting(pose_in: np.ndarray, pose_out: np.ndarray, fps: float, rest_spe
     speed = np.r_[np.inf, np.linalg.norm(np.diff(pose_in[:, :3], axis=0), axis=1) * fps]
     rest = speed < rest_speed
     rest[0] = rest[1] if len(rest) > 1 else True  # the first frame rests with the second
-    t, T = 0, len(rest)
-    while t < T:
-        if not rest[t]:
-            t += 1
-            continue
-        b = t
-        while b + 1 < T and rest[b + 1]:
-            b += 1
-        start = t - 1 if t > 0 else 0  # the frame it arrives at rest on rests too
-        out[start : b + 1, :3] = pose_in[start : b + 1, :3] + off[b]
-        t = b + 1
+    for a, b in runs(rest):
+        a = max(a - 1, 0)  # the frame it arrives at rest on rests too
+        out[a:b, :3] = pose_in[a:b, :3] + off[b - 1]
     return out
