@@ -155,8 +155,11 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
     figures = validate(scene, roll, clip.qpos, objects)
     loads = None if ref.grasp is None else (ref.grasp.offset, ref.grasp.force)
     figures.update(static_torque_figures(ref.qpos, loads, scene.profile.effort_limit, clip.fps))  # what the reference asks of the upper body
-    held = np.zeros(0, bool) if ref.grasp is None else ref.grasp.grasped.any(axis=1)
-    outside = held & ~ref.grasp.friction_ok if held.size else held
+    if ref.grasp is None:
+        held = outside = np.zeros(0, bool)
+    else:
+        held = ref.grasp.grasped.any(axis=1)
+        outside = held & ~ref.grasp.friction_ok
     figures["reference_grasp_outside_friction_frac"] = float(outside.sum() / max(held.sum(), 1))  # of the held frames
     if not figures["valid"] and outside.any():  # a cause no controller can overcome
         figures["reason"] += f"; the hands' planned force leaves their friction cones from t={np.flatnonzero(outside)[0] / clip.fps:.2f} s"
