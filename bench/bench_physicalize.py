@@ -13,7 +13,10 @@ per wall second, ``rt/core`` per CPU second (robust to a shared, loaded machine:
 thread); the issue's bar is >= 5 per core. ``ref tau``: the largest static torque the tracked reference asks of an
 upper-body motor, as a fraction of its limit (:mod:`physicalize.static_torque`); ``grip out``: the share of held frames
 whose planned hand forces leave the hands' friction cones (:func:`physicalize.grasp.press_force`). First, a robustness table:
-per default task, the valid count over ``--seeds`` synthetic seeds (each moves the objects a few cm).
+per default task, the valid count over ``--seeds`` synthetic seeds (each moves the objects a few cm). Then the
+teacher's gait envelope: 10-step G1 walks (:func:`physicalize.synthetic_gait.walk_with_turn`, straight and turning 90
+degrees) over step length x (swing, double support) timing, each cell ``ok`` (walked to the end, root within 0.25 m
+of the reference) or the fraction of the walk simulated before it failed.
 """
 
 from __future__ import annotations
@@ -27,13 +30,22 @@ import torch
 
 torch.set_num_threads(1)
 
+import numpy as np  # noqa: E402
+
 from physicalize.residual import train_residual  # noqa: E402
+from physicalize.rollout import initial_state, simulate  # noqa: E402
 from physicalize.stage import REFERENCES, physicalize_clip  # noqa: E402
+from physicalize.synthetic_gait import gait_reference, walk_with_turn  # noqa: E402
+from physicalize.wbc import WholeBodyController  # noqa: E402
 from pipeline.default_input import default_clips  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
+from pipeline.scene import build_scene  # noqa: E402
 from retarget.stage import retarget_clip  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
+GAIT_STEPS_M = (0.1, 0.2, 0.3, 0.4, 0.5)  # centre-line advance per step (each foot moves twice that)
+GAIT_TIMINGS_S = ((0.35, 0.10), (0.40, 0.10), (0.45, 0.12), (0.50, 0.15), (0.60, 0.20))  # (swing, double support)
+GAIT_TURNS_RAD = (0.0, np.pi / 2)
 REAL = ["omomo/sub3_largebox_003.pt", "intermimic/sub2_largetable_000.pt", "bvh/pymo_walk_120hz.bvh"]
 COLUMNS = [("valid", "valid"), ("fell", "fell"), ("frames_simulated", "sim/ref"), ("mpjpe_m", "mpjpe"), ("root_pos_err_max_m", "root max"),
            ("foot_slide_frac_1cm_per_frame", "slide"), ("penetration_max_m", "pen max"), ("torque_saturation_frac", "sat"),
@@ -76,13 +88,42 @@ def _seed_table(n: int) -> None:
         print(f"  {task:9s} valid {sum(f['valid'] for _, f in runs)}/{len(runs)}" + (f"  ({'; '.join(bad[:3])}{' ...' if len(bad) > 3 else ''})" if bad else ""), flush=True)
 
 
+def _gait_cell(scene, step_m: float, swing_s: float, double_s: float, turn_rad: float) -> str:
+    qpos, _ = walk_with_turn(scene, steps=10, step_m=step_m, turn_rad=turn_rad, swing_s=swing_s, double_s=double_s)
+    ref = gait_reference(scene, qpos)
+    roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile), *initial_state(scene, ref, {}))
+    root_err = np.linalg.norm(roll.qpos[:, :2] - ref.qpos[: roll.frames, :2], axis=1)
+    if roll.fell_at is None and root_err.max() <= 0.25:
+        return "ok"
+    end = min(roll.frames, int(np.argmax(root_err > 0.25)) if (root_err > 0.25).any() else roll.frames)
+    return f"{end / len(ref.qpos):.2f}"
+
+
+def _gait_table() -> None:
+    """The base teacher's gait envelope (see the module docstring): rows (swing, double support) [s], columns
+    the step length [m] and the mean speed it gives."""
+    scene = build_scene()
+    total = ok = 0
+    for turn in GAIT_TURNS_RAD:
+        print(f"gait envelope, 10 steps turning {np.degrees(turn):.0f} deg (ok, or the fraction walked before a fall or 0.25 m of root error):")
+        print(f"  {'swing/ds [s]':14s}" + "".join(f"{f'{s:.1f} m':>16s}" for s in GAIT_STEPS_M))
+        for swing, ds in GAIT_TIMINGS_S:
+            cells = [_gait_cell(scene, s, swing, ds, turn) for s in GAIT_STEPS_M]
+            total, ok = total + len(cells), ok + cells.count("ok")
+            print(f"  {f'{swing:.2f}/{ds:.2f}':14s}" + "".join(f"{f'{c} ({s / (swing + ds):.2f} m/s)':>16s}" for c, s in zip(cells, GAIT_STEPS_M)), flush=True)
+    print(f"gait envelope: {ok}/{total} walks ok")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--residual-iterations", type=int, default=50, help="PPO iterations (x 16 envs) of the smoke residual per clip; 0: skip")
     ap.add_argument("--seeds", type=int, default=10, help="synthetic seeds 0..N-1 of the robustness table (feasible reference, base teacher); 0: skip")
+    ap.add_argument("--no-gait", action="store_true", help="skip the gait envelope table")
     args = ap.parse_args()
     if args.seeds:
         _seed_table(args.seeds)
+    if not args.no_gait:
+        _gait_table()
     print(f"{'clip':24s}{'reference':14s}" + "".join(f"{h:>10s}" for _, h in COLUMNS) + "  reason")
     kinds = [*REFERENCES, *(["feasible+res"] if args.residual_iterations else [])]
     valid = {k: [] for k in kinds}

@@ -8,7 +8,7 @@ import pytest
 from physicalize.rollout import initial_state, simulate
 from physicalize.wbc import FOOT_BODIES, WholeBodyController
 from pipeline.scene import build_scene
-from synthetic_gait import gait_reference, stepping_in_place, walk_with_turn
+from physicalize.synthetic_gait import gait_reference, stepping_in_place, walk_with_turn
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,5 @@
-"""Synthetic gait references for the G1 (a helper module for the tests, not a test file).
+"""Synthetic gait references for the G1: the walks of ``tests/test_gait.py`` and the gait envelope of
+``make bench-physicalize``.
 
 A gait is a footstep sequence: after a standing phase, each step lifts one foot for ``swing_s``
 (sole height ``h sin(pi s)``, horizontal position and heading blended by a smooth step from the
