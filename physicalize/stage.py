@@ -134,24 +134,13 @@ def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "
     return scene, ref, objects, zmp
 
 
-def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str = "feasible", perturb=None,
-                     teacher: str = "base", grasp: bool = True) -> tuple[RobotClip | None, Rollout, dict, dict]:  # fmt: skip
-    """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
-    ``reference`` (see :func:`tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`)."""
-    from physicalize.rollout import initial_state, replay, simulate
+def _figures(scene, ref, roll: Rollout, clip: RobotClip, objects, qpos0, qvel0, perturb) -> dict:
+    """The validity figures of one rollout (:mod:`physicalize.validate`), what the reference asks beyond the
+    robot (static upper-body torque, hand forces outside friction) and the open-loop replay check."""
+    from physicalize.rollout import replay
     from physicalize.static_torque import static_torque_figures
     from physicalize.validate import validate
-    from physicalize.wbc import WholeBodyController
 
-    spec = parse_teacher(teacher)
-    residual = None if spec.checkpoint is None else _load_residual(str(spec.checkpoint), spec.digest)
-    t0, cpu0 = time.perf_counter(), time.process_time()
-    scene, ref, objects, zmp = tracking_problem(clip, profile, reference, grasp)
-    qpos0, qvel0 = initial_state(scene, ref, objects)
-    roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile), qpos0, qvel0, contact_links=clip.contact_links, perturb=perturb,
-                    residual=residual)  # fmt: skip
-    roll.seconds = time.perf_counter() - t0  # planning + tracking
-    cpu = time.process_time() - cpu0
     figures = validate(scene, roll, clip.qpos, objects)
     loads = None if ref.grasp is None else (ref.grasp.offset, ref.grasp.force)
     figures.update(static_torque_figures(ref.qpos, loads, scene.profile.effort_limit, clip.fps))  # what the reference asks of the upper body
@@ -163,19 +152,59 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
     figures["reference_grasp_outside_friction_frac"] = float(outside.sum() / max(held.sum(), 1))  # of the held frames
     if not figures["valid"] and outside.any():  # a cause no controller can overcome
         figures["reason"] += f"; the hands' planned force leaves their friction cones from t={np.flatnonzero(outside)[0] / clip.fps:.2f} s"
-    figures["realtime_factor_per_core"] = roll.frames / clip.fps / max(cpu, 1e-9)  # CPU time of this (single-threaded) process
     qs, _ = replay(scene.model, qpos0, qvel0, roll.action)
     figures["replay_err_max_m"] = float(np.abs(np.vstack([qs[:-1] - roll.qpos, qs[-1:] - roll.final_qpos])).max())
     if figures["replay_err_max_m"] > REPLAY_TOL_M and perturb is None:
         figures["valid"] = False
         figures["reason"] = "; ".join(filter(None, [figures["reason"], f"replay error {figures['replay_err_max_m']:.3g} m > {REPLAY_TOL_M:g}"]))
+    return figures
+
+
+def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str = "feasible", perturb=None,
+                     teacher: str = "base", grasp: bool = True, gains=None) -> tuple[RobotClip | None, Rollout, dict, dict]:  # fmt: skip
+    """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
+    ``reference`` (see :func:`tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`).
+
+    The base teacher tries the QP gain sets ``gains`` (default :data:`physicalize.wbc.TEACHER_GAINS`) in
+    order from the same initial state and keeps the first rollout that is valid, else the first set's:
+    rejection sampling over controller gains, each rollout validated on its own. ``figures`` name the set
+    kept (``teacher_gains``, its index) and how many ran (``teacher_attempts``); timings count them all.
+    A residual teacher runs the first set only (its policy was trained on it)."""
+    from physicalize.rollout import initial_state, simulate
+    from physicalize.wbc import TEACHER_GAINS, WholeBodyController
+
+    spec = parse_teacher(teacher)
+    residual = None if spec.checkpoint is None else _load_residual(str(spec.checkpoint), spec.digest)
+    gains = (TEACHER_GAINS if gains is None else tuple(gains))[: 1 if residual is not None else None]
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    scene, ref, objects, zmp = tracking_problem(clip, profile, reference, grasp)
+    qpos0, qvel0 = initial_state(scene, ref, objects)
+    tried, wall, cpu = [], time.perf_counter() - t0, time.process_time() - cpu0  # planning + tracking, every attempt (not the checks)
+    for config in gains:
+        t0, cpu0 = time.perf_counter(), time.process_time()
+        roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile, config), qpos0, qvel0, contact_links=clip.contact_links,
+                        perturb=perturb, residual=residual)  # fmt: skip
+        wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
+        roll.seconds = wall
+        tried.append((roll, _figures(scene, ref, roll, clip, objects, qpos0, qvel0, perturb)))
+        if tried[-1][1]["valid"]:
+            break
+    kept = len(tried) - 1 if tried[-1][1]["valid"] else 0
+    roll, figures = tried[kept]
+    if not figures["valid"] and len(tried) > 1:
+        figures["reason"] += "".join(f"; gain set {k}: {f['reason'].split(';')[0]}" for k, (_, f) in enumerate(tried[1:], 1))
+    figures["teacher_gains"], figures["teacher_attempts"] = kept, len(tried)
+    roll.seconds = wall
+    figures["realtime_factor"] = roll.frames / clip.fps / max(wall, 1e-9)
+    figures["realtime_factor_per_core"] = roll.frames / clip.fps / max(cpu, 1e-9)  # CPU time of this (single-threaded) process
     T = roll.frames
     sim_objects = tuple(replace(o, pose=roll.qpos[:, scene.object_qpos_adr[o.name] : scene.object_qpos_adr[o.name] + 7],
                                 contact=None if o.contact is None else o.contact[:T]) for o in clip.objects)  # fmt: skip
     robot = RobotClip(
         roll.qpos[:, :36], clip.fps, clip.source, objects=sim_objects, contact_links=clip.contact_links,
         contacts=roll.contact if clip.contact_links else None, method="lessmimic-wbc" + ("+residual" if residual is not None else ""), task=clip.task,
-        provenance={**clip.provenance, "teacher": teacher, **({"teacher_sha256": spec.digest} if spec.digest else {}), "actuator_profile": profile, "reference": reference},
+        provenance={**clip.provenance, "teacher": teacher, **({"teacher_sha256": spec.digest} if spec.digest else {}), "actuator_profile": profile, "reference": reference,
+                    "teacher_gains": kept},
     )  # fmt: skip
     com = {"reference": ref.com[:T], "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T], "zmp_planned": None if zmp is None else zmp[:T],
            "simulated": _sim_com(scene.model, roll.qpos), "pelvis_ref": clip.qpos[:T, 2], "pelvis_sim": roll.qpos[:, 2],
@@ -231,7 +260,8 @@ CARD_NOTES = [
     "with a training-free whole-body QP controller (the `base` teacher) on a dynamically feasible reference (a ZMP preview-"
     "control CoM plan over the clip's foot support schedule, the whole body re-solved onto it by IK keeping the "
     "footsteps, hands and posture). Objects are free bodies moved only by contact: no welds, no "
-    "external or root assist forces.",
+    "external or root assist forces. The controller's QP gain sets are tried in order per clip and the first valid "
+    "rollout is kept (its index: `teacher_gains` in the episode's validation figures).",
     "`action` is the 29 joint position targets the position actuators held from frame t to t+1 (actuator profile in the "
     "card header); `observation.torque` the actuator torques applied (mean over the 4 physics steps of the hold).",
     "`observation.state`/`observation.qvel` are the simulation's qpos/qvel (root linear velocity world frame, root angular "

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from physicalize.reference import place_on_floor
-from physicalize.stage import _run_one
+from physicalize.stage import _run_one, physicalize_clip
+from physicalize.wbc import TEACHER_GAINS, WBCConfig
 from pipeline.cli import main
 from pipeline.clip import ObjectTrack, RobotClip
 from pipeline.clip_dataset import robot_clips_to_episodes
@@ -69,6 +70,19 @@ def test_valid_clip_written_invalid_one_reported(retargeted, capsys):
     features, episodes = robot_clips_to_episodes(_clips()[:1])  # another retargeted dataset: its output is not up to date
     write_dataset(stage_dir("hand", "retargeted"), "lessmimic/hand-retargeted", 50, features, episodes, overwrite=True)
     assert main(["physicalize", "--name", "hand", "--keep-invalid"]) == 2
+
+
+def test_the_next_gain_set_is_tried_when_a_rollout_is_invalid():
+    """Rejection sampling over the QP's gain sets: a set with 5% of the motors' torque cannot stand, so the next
+    set's valid rollout is kept; when every set fails, the first set's rollout and reason are kept."""
+    stand = _clips()[0]
+    weak = WBCConfig(effort_scale=0.05)
+    _, roll, f, _ = physicalize_clip(stand, gains=(weak, TEACHER_GAINS[0]))
+    assert f["valid"] and (f["teacher_gains"], f["teacher_attempts"]) == (1, 2) and roll.frames == 60
+    _, _, f, _ = physicalize_clip(stand, gains=(weak, weak))
+    assert not f["valid"] and (f["teacher_gains"], f["teacher_attempts"]) == (0, 2) and "; gain set 1: " in f["reason"]
+    robot, _, f, _ = physicalize_clip(stand)
+    assert f["valid"] and (f["teacher_gains"], f["teacher_attempts"]) == (0, 1) and robot.provenance["teacher_gains"] == 0
 
 
 def test_bad_arguments_are_one_line_errors(retargeted, capsys):
