@@ -6,7 +6,8 @@ reference (:mod:`physicalize.reference`), the feasible CoM plan (:mod:`physicali
 whole body re-solved onto it (:mod:`physicalize.feasible`), track it
 closed loop with the teacher (``base``: :class:`physicalize.wbc.WholeBodyController`), record the
 state-action trajectory (:mod:`physicalize.rollout`), replay the actions open loop to check
-self-consistency, and measure the validity figures (:mod:`physicalize.validate`). Invalid clips stay
+self-consistency, and measure the validity figures (:mod:`physicalize.validate`); the base teacher tries
+its QP gain sets (:data:`physicalize.wbc.TEACHER_GAINS`) in order until a rollout is valid. Invalid clips stay
 in the report with their reason and are left out of the dataset unless ``keep_invalid``. A clip
 that raises is reported invalid with the error; the batch goes on. Finished clips are cached in
 ``datasets/<NAME>/.work/physicalize/`` so an interrupted run resumes; the run is deterministic. A
