@@ -115,14 +115,15 @@ class WBCConfig:
 
 
 # The base teacher's gain sets, tried in this order on a clip until one tracks it validly
-# (physicalize.stage.physicalize_clip). A heavier horizontal CoM task makes posture, orientation and
-# hand tasks yield to balance: with (5000, 5000, 1000) the 50 synthetic 10-step walks of the gait
-# envelope go from 32 to 44, the default Carry becomes valid, but the OMOMO box clip falls and SitStand
+# (physicalize.stage.physicalize_clip): a ladder of heavier horizontal CoM tasks, which make posture,
+# orientation and hand tasks yield to balance. Alone, (5000, 5000, 1000) walks 44 of the gait envelope's
+# 50 synthetic walks (the first set 32) and the default Carry, but the OMOMO box clip falls and SitStand
 # seeds break on joint-limit frames; no single set was best on every clip (`make bench-physicalize`).
 TEACHER_GAINS: tuple[WBCConfig, ...] = (
     WBCConfig(),
     WBCConfig(w_com=(5000.0, 5000.0, 1000.0)),
     WBCConfig(w_com=(5000.0, 5000.0, 500.0)),
+    WBCConfig(w_com=(10000.0, 10000.0, 1000.0)),
 )
 
 
