@@ -34,6 +34,7 @@ from pipeline.errors import InputError
 
 TEACHERS = ("base", "base+residual:<checkpoint>")
 REPLAY_TOL_M = 1e-6
+NO_RETRY_GRIP_OUT = 0.5  # share of held frames whose planned hand forces leave the friction cones (the InterMimic table: 0.85)
 
 
 @dataclass(frozen=True)
@@ -168,7 +169,9 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
 
     The base teacher tries the QP gain sets ``gains`` (default :data:`physicalize.wbc.TEACHER_GAINS`) in
     order from the same initial state and keeps the first rollout that is valid, else the first set's:
-    rejection sampling over controller gains, each rollout validated on its own. ``figures`` name the set
+    rejection sampling over controller gains, each rollout validated on its own. A reference whose hands
+    must push outside their friction cones on most held frames (> :data:`NO_RETRY_GRIP_OUT`) is not
+    retried: no gains make a pressing hand pull. ``figures`` name the set
     kept (``teacher_gains``, its index) and how many ran (``teacher_attempts``); timings count them all.
     A residual teacher runs the first set only (its policy was trained on it)."""
     from physicalize.rollout import initial_state, simulate
@@ -188,7 +191,7 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
         roll.seconds = wall
         tried.append((roll, _figures(scene, ref, roll, clip, objects, qpos0, qvel0, perturb)))
-        if tried[-1][1]["valid"]:
+        if tried[-1][1]["valid"] or tried[-1][1]["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT:
             break
     kept = len(tried) - 1 if tried[-1][1]["valid"] else 0
     roll, figures = tried[kept]

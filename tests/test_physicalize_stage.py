@@ -4,9 +4,10 @@ import json
 
 import numpy as np
 import pytest
+from mocap_paths import SHARED_MOCAP, needs_shared
 
 from physicalize.reference import place_on_floor
-from physicalize.stage import _run_one, physicalize_clip
+from physicalize.stage import NO_RETRY_GRIP_OUT, _run_one, physicalize_clip
 from physicalize.wbc import TEACHER_GAINS, WBCConfig
 from pipeline.cli import main
 from pipeline.clip import ObjectTrack, RobotClip
@@ -83,6 +84,17 @@ def test_the_next_gain_set_is_tried_when_a_rollout_is_invalid():
     assert not f["valid"] and (f["teacher_gains"], f["teacher_attempts"]) == (0, 2) and "; gain set 1: " in f["reason"]
     robot, _, f, _ = physicalize_clip(stand)
     assert f["valid"] and (f["teacher_gains"], f["teacher_attempts"]) == (0, 1) and robot.provenance["teacher_gains"] == 0
+
+
+@needs_shared
+def test_a_reference_the_hands_cannot_follow_is_not_retried():
+    """The InterMimic table is dragged towards the body by hands that can only press: no gain set can follow it."""
+    from pipeline.readers import read_clips
+    from retarget.stage import retarget_clip
+
+    clip = retarget_clip(read_clips(SHARED_MOCAP / "intermimic" / "sub2_largetable_000.pt")[0])[0]
+    _, _, f, _ = physicalize_clip(clip)
+    assert f["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT and not f["valid"] and f["teacher_attempts"] == 1
 
 
 def test_bad_arguments_are_one_line_errors(retargeted, capsys):
