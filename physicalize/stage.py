@@ -24,6 +24,7 @@ import time
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from tqdm import tqdm
@@ -31,6 +32,9 @@ from tqdm import tqdm
 from physicalize.rollout import Rollout
 from pipeline.clip import PhysicalizedClip, RobotClip
 from pipeline.errors import InputError
+
+if TYPE_CHECKING:
+    from physicalize.wbc import WBCConfig
 
 TEACHERS = ("base", "base+residual:<checkpoint>")
 REPLAY_TOL_M = 1e-6
@@ -163,7 +167,7 @@ def _figures(scene, ref, roll: Rollout, clip: RobotClip, objects, qpos0, qvel0, 
 
 
 def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str = "feasible", perturb=None,
-                     teacher: str = "base", grasp: bool = True, gains=None) -> tuple[RobotClip | None, Rollout, dict, dict]:  # fmt: skip
+                     teacher: str = "base", grasp: bool = True, gains: tuple[WBCConfig, ...] | None = None) -> tuple[RobotClip | None, Rollout, dict, dict]:  # fmt: skip
     """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
     ``reference`` (see :func:`tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`).
 
