@@ -114,11 +114,10 @@ class WBCConfig:
     min_foot_gap: float = 0.08  # m, least lateral distance of the swing foot from the stance foot (no crossing; 0.14 moved narrow footsteps outward: frames 4557 -> 4877)
 
 
-# The base teacher's gain sets, tried in this order on a clip until one tracks it validly
-# (physicalize.stage.physicalize_clip): a ladder of heavier horizontal CoM tasks, which make posture,
-# orientation and hand tasks yield to balance. Alone, (5000, 5000, 1000) walks 44 of the gait envelope's
-# 50 synthetic walks (the first set 32) and the default Carry, but the OMOMO box clip falls and SitStand
-# seeds break on joint-limit frames; no single set was best on every clip (`make bench-physicalize`).
+# The base teacher's gain sets, tried in order on a clip until one tracks it validly (physicalize.stage.physicalize_clip):
+# heavier horizontal CoM tasks make posture, orientation and hand tasks yield to balance. Alone, (5000, 5000, 1000) walks
+# 44 of the gait envelope's 50 walks (the first set 32) and the default Carry, but the OMOMO box falls and SitStand seeds
+# break on joint-limit frames: no single set was best on every clip (`make bench-physicalize`).
 TEACHER_GAINS: tuple[WBCConfig, ...] = (
     WBCConfig(),
     WBCConfig(w_com=(5000.0, 5000.0, 1000.0)),
