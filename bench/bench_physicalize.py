@@ -2,7 +2,7 @@
 can track: ``raw`` (the retargeted motion), ``planned`` (its posture with the ZMP preview-planned
 CoM) and ``feasible`` (the whole body re-solved by IK onto the plan: the stage's default), then
 ``feasible/g0``: the feasible reference with the base teacher's first QP gain set only (the other rows try
-the sets of :data:`physicalize.wbc.TEACHER_GAINS` in order and keep the first valid rollout; ``gains`` is the
+the sets of :data:`physicalize.wbc_config.TEACHER_GAINS` in order and keep the first valid rollout; ``gains`` is the
 set kept, ``tries`` how many ran), and ``feasible+res``: the feasible reference with the base teacher plus a
 learned residual trained on that clip at SMOKE scale (``--residual-iterations`` x 16 envs of PPO on one core, default 50; 0
 skips it; training time not in ``rt``).
@@ -38,7 +38,8 @@ from physicalize.residual import train_residual  # noqa: E402
 from physicalize.rollout import initial_state, simulate  # noqa: E402
 from physicalize.stage import REFERENCES, physicalize_clip  # noqa: E402
 from physicalize.synthetic_gait import gait_reference, walk_with_turn  # noqa: E402
-from physicalize.wbc import TEACHER_GAINS, WholeBodyController  # noqa: E402
+from physicalize.wbc import WholeBodyController  # noqa: E402
+from physicalize.wbc_config import TEACHER_GAINS  # noqa: E402
 from pipeline.default_input import default_clips  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
 from pipeline.scene import build_scene  # noqa: E402

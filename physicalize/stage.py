@@ -7,7 +7,7 @@ whole body re-solved onto it (:mod:`physicalize.feasible`), track it
 closed loop with the teacher (``base``: :class:`physicalize.wbc.WholeBodyController`), record the
 state-action trajectory (:mod:`physicalize.rollout`), replay the actions open loop to check
 self-consistency, and measure the validity figures (:mod:`physicalize.validate`); the base teacher tries
-its QP gain sets (:data:`physicalize.wbc.TEACHER_GAINS`) in order until a rollout is valid. Invalid clips stay
+its QP gain sets (:data:`physicalize.wbc_config.TEACHER_GAINS`) in order until a rollout is valid. Invalid clips stay
 in the report with their reason and are left out of the dataset unless ``keep_invalid``. A clip
 that raises is reported invalid with the error; the batch goes on. Finished clips are cached in
 ``datasets/<NAME>/.work/physicalize/`` so an interrupted run resumes; the run is deterministic. A
@@ -34,7 +34,7 @@ from pipeline.clip import PhysicalizedClip, RobotClip
 from pipeline.errors import InputError
 
 if TYPE_CHECKING:
-    from physicalize.wbc import WBCConfig
+    from physicalize.wbc_config import WBCConfig
 
 TEACHERS = ("base", "base+residual:<checkpoint>")
 REPLAY_TOL_M = 1e-6
@@ -171,7 +171,7 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
     """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
     ``reference`` (see :func:`tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`).
 
-    The base teacher tries the QP gain sets ``gains`` (default :data:`physicalize.wbc.TEACHER_GAINS`) in
+    The base teacher tries the QP gain sets ``gains`` (default :data:`physicalize.wbc_config.TEACHER_GAINS`) in
     order from the same initial state and keeps the first rollout that is valid, else the first set's:
     rejection sampling over controller gains, each rollout validated on its own. A reference whose hands
     must push outside their friction cones on most held frames (> :data:`NO_RETRY_GRIP_OUT`) is not
@@ -179,7 +179,8 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
     kept (``teacher_gains``, its index) and how many ran (``teacher_attempts``); timings count them all.
     A residual teacher runs the first set only (its policy was trained on it)."""
     from physicalize.rollout import initial_state, simulate
-    from physicalize.wbc import TEACHER_GAINS, WholeBodyController
+    from physicalize.wbc import WholeBodyController
+    from physicalize.wbc_config import TEACHER_GAINS
 
     spec = parse_teacher(teacher)
     residual = None if spec.checkpoint is None else _load_residual(str(spec.checkpoint), spec.digest)

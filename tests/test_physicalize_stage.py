@@ -8,7 +8,7 @@ from mocap_paths import SHARED_MOCAP, needs_shared
 
 from physicalize.reference import place_on_floor
 from physicalize.stage import NO_RETRY_GRIP_OUT, _run_one, physicalize_clip
-from physicalize.wbc import TEACHER_GAINS, WBCConfig
+from physicalize.wbc_config import TEACHER_GAINS, WBCConfig
 from pipeline.cli import main
 from pipeline.clip import ObjectTrack, RobotClip
 from pipeline.clip_dataset import robot_clips_to_episodes

@@ -9,7 +9,8 @@ import pytest
 from physicalize.reference import build_reference, place_on_floor
 from physicalize.rollout import initial_state, simulate
 from physicalize.validate import LIMIT_TOL
-from physicalize.wbc import WBCConfig, WholeBodyController
+from physicalize.wbc import WholeBodyController
+from physicalize.wbc_config import WBCConfig
 from physicalize.wbc_rows import limit_bounds
 from pipeline.robot import G1_JOINT_NAMES, default_qpos
 from pipeline.geometry import Primitive
