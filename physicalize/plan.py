@@ -128,7 +128,7 @@ def zmp_reference(ref: Reference, single_support_scale: float = SINGLE_SUPPORT_S
     cop = ref.com[:, :2] if shift is None else ref.com[:, :2] + shift
     out = np.zeros((ref.frames, 2))
     seated = np.zeros(ref.frames, bool) if ref.seat is None else np.isfinite(ref.seat[:, :, 0]).any(axis=1)
-    for a, b in runs(seated.copy()):  # the plan stands on the feet before the seat lets go
+    for a, b in runs(seated):  # the plan stands on the feet before the seat lets go
         seated[max(a, b - int(round(SEAT_LEAD_S * ref.fps))) : b] = False
     for t in range(ref.frames):
         poly = support_polygon(ref, t, seat=bool(seated[t]))

@@ -194,7 +194,6 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
         roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile, config), qpos0, qvel0, contact_links=clip.contact_links,
                         perturb=perturb, residual=residual)  # fmt: skip
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
-        roll.seconds = wall
         tried.append((roll, _figures(scene, ref, roll, clip, objects, qpos0, qvel0, perturb)))
         if tried[-1][1]["valid"] or tried[-1][1]["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT:
             break
