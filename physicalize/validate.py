@@ -139,12 +139,22 @@ def validate(scene: Scene, rollout: Rollout, ref_qpos: np.ndarray, ref_objects: 
     return figures
 
 
+NOT_AVERAGED = ("episode",)  # an index, not a figure
+COUNTED = ("teacher_gains",)  # which gain set was kept: clips per set, not a mean
+
+
 def summarise(per_clip: list[dict]) -> dict:
-    """Dataset-level summary: ``valid_frac`` and the mean of each figure over clips."""
+    """Dataset-level summary: ``valid_frac``, ``clips``, the mean of each numeric figure over clips and,
+    for the :data:`COUNTED` ones, the number of clips per value (``clips_per_teacher_gains``: {"0": 3, "1": 1})."""
     if not per_clip:
         return {"valid_frac": 0.0, "clips": 0}
     out = {"valid_frac": float(np.mean([c["valid"] for c in per_clip])), "clips": len(per_clip)}
     for k, v in per_clip[0].items():
-        if isinstance(v, (int, float)) and not isinstance(v, bool):
+        if k in NOT_AVERAGED or isinstance(v, bool) or not isinstance(v, (int, float)):
+            continue
+        if k in COUNTED:
+            values = [c[k] for c in per_clip if k in c]
+            out[f"clips_per_{k}"] = {str(x): values.count(x) for x in sorted(set(values))}
+        else:
             out[k] = float(np.mean([c.get(k, np.nan) for c in per_clip]))
     return out

@@ -1,11 +1,11 @@
-"""Each validity figure on a hand-made failing case, and the passing case."""
+"""Each validity figure on a hand-made failing case, and the passing case; the dataset summary."""
 
 import numpy as np
 import pytest
 
 from physicalize.reference import build_reference, place_on_floor
 from physicalize.rollout import initial_state, simulate
-from physicalize.validate import foot_slide_frac, validate
+from physicalize.validate import foot_slide_frac, summarise, validate
 from physicalize.wbc import WholeBodyController
 from pipeline.robot import G1_JOINT_NAMES, default_qpos
 from pipeline.scene import build_scene
@@ -80,3 +80,13 @@ def test_foot_slide_counts_loaded_frames_only():
     assert foot_slide_frac(xy, loaded) == 0.25
     loaded[3, 0] = False  # not loaded at landing: not a slide
     assert foot_slide_frac(xy, loaded) == 0.0
+
+
+def test_summary_counts_gain_sets_and_averages_figures():
+    clips = [{"episode": 0, "valid": True, "mpjpe_m": 0.02, "teacher_gains": 0},
+             {"episode": 1, "valid": True, "mpjpe_m": 0.04, "teacher_gains": 1},
+             {"episode": 2, "valid": False, "mpjpe_m": 0.06, "teacher_gains": 0}]  # fmt: skip
+    s = summarise(clips)
+    assert s["clips"] == 3 and s["valid_frac"] == 2 / 3 and abs(s["mpjpe_m"] - 0.04) < 1e-12
+    assert s["clips_per_teacher_gains"] == {"0": 2, "1": 1}
+    assert "teacher_gains" not in s and "episode" not in s
