@@ -19,6 +19,9 @@ per default task, the valid count over ``--seeds`` synthetic seeds (each moves t
 teacher's gait envelope: 10-step G1 walks (:func:`physicalize.synthetic_gait.walk_with_turn`, straight and turning 90
 degrees) over step length x (swing, double support) timing, each cell ``ok`` (walked to the end, root within 0.25 m
 of the reference), ``ok gK`` (walked with gain set K) or the fraction of the walk simulated before it failed.
+Then an object mass sweep: each clip with objects, its objects' mass set to each of :data:`MASSES_KG` (a held or
+pushed object's mass changes the loads but not the reference), each cell ``ok`` or the first failure: how far a clip
+sits from the validity bars.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 import torch
@@ -49,6 +53,7 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
 GAIT_STEPS_M = (0.1, 0.2, 0.3, 0.4, 0.5)  # centre-line advance per step (each foot moves twice that)
 GAIT_TIMINGS_S = ((0.35, 0.10), (0.40, 0.10), (0.45, 0.12), (0.50, 0.15), (0.60, 0.20))  # (swing, double support)
 GAIT_TURNS_RAD = (0.0, np.pi / 2)
+MASSES_KG = (0.5, 1.0, 1.5, 2.5, 3.0)  # object masses of the sweep (the scene's default is 2 kg where the input gives none)
 REAL = ["omomo/sub3_largebox_003.pt", "intermimic/sub2_largetable_000.pt", "bvh/pymo_walk_120hz.bvh"]
 COLUMNS = [("valid", "valid"), ("fell", "fell"), ("frames_simulated", "sim/ref"), ("mpjpe_m", "mpjpe"), ("root_pos_err_max_m", "root max"),
            ("foot_slide_frac_1cm_per_frame", "slide"), ("penetration_max_m", "pen max"), ("torque_saturation_frac", "sat"),
@@ -124,23 +129,41 @@ def _gait_table() -> None:
     print(f"gait envelope: {cells.count('ok')}/{len(cells)} walks with the first gain set, {sum(c.startswith('ok') for c in cells)}/{len(cells)} with any")
 
 
+def _mass_table(robots: list) -> None:
+    """Per retargeted clip with objects (``robots``: (name, RobotClip)), validity with its objects' mass set to each
+    of :data:`MASSES_KG` (feasible reference, base teacher with its gain sets)."""
+    print("object mass sweep (feasible reference, base teacher; ok, else the first failure):")
+    print(f"  {'clip':24s}" + "".join(f"{f'{kg:g} kg':>26s}" for kg in MASSES_KG))
+    for name, robot in robots:
+        if not robot.objects:
+            continue
+        cells = []
+        for kg in MASSES_KG:
+            f = physicalize_clip(replace(robot, objects=tuple(replace(o, mass=kg) for o in robot.objects)))[2]
+            cells.append("ok" if f["valid"] else f["reason"].split(";")[0][:24])
+        print(f"  {name:24s}" + "".join(f"{c:>26s}" for c in cells) + f"  valid {cells.count('ok')}/{len(cells)}", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--residual-iterations", type=int, default=50, help="PPO iterations (x 16 envs) of the smoke residual per clip; 0: skip")
     ap.add_argument("--seeds", type=int, default=10, help="synthetic seeds 0..N-1 of the robustness table (feasible reference, base teacher); 0: skip")
     ap.add_argument("--no-gait", action="store_true", help="skip the gait envelope table")
+    ap.add_argument("--no-mass", action="store_true", help="skip the object mass sweep")
     args = ap.parse_args()
     if args.seeds:
         _seed_table(args.seeds)
     if not args.no_gait:
         _gait_table()
+    robots = [(name, retarget_clip(human)[0]) for name, human in _clips()]
+    if not args.no_mass:
+        _mass_table(robots)
     print(f"{'clip':24s}{'reference':14s}" + "".join(f"{h:>10s}" for _, h in COLUMNS) + "  reason")
     kinds = [*REFERENCES, "feasible/g0", *(["feasible+res"] if args.residual_iterations else [])]
     valid = {k: [] for k in kinds}
     seconds = {k: [0.0, 0.0] for k in kinds}  # simulated, CPU
     with tempfile.TemporaryDirectory() as tmp:
-        for name, human in _clips():
-            robot, _, _ = retarget_clip(human)
+        for name, robot in robots:
             for kind in kinds:
                 if kind == "feasible+res":
                     ckpt = train_residual(robot, args.residual_iterations, 16, 0, Path(tmp) / "residual.pt")
