@@ -140,24 +140,34 @@ def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "
     return scene, ref, objects, zmp
 
 
-def _figures(scene, ref, roll: Rollout, clip: RobotClip, objects, qpos0, qvel0, perturb) -> dict:
-    """The validity figures of one rollout (:mod:`physicalize.validate`), what the reference asks beyond the
-    robot (static upper-body torque, hand forces outside friction) and the open-loop replay check."""
-    from physicalize.rollout import replay
+def _reference_figures(scene, ref, fps: float) -> tuple[dict, str]:
+    """What the tracked reference asks beyond the robot, the same for every rollout of it: the static
+    upper-body torque (:mod:`physicalize.static_torque`) and the share of held frames whose planned hand
+    forces leave the friction cones; with the cause an invalid rollout's reason names ("" when none)."""
     from physicalize.static_torque import static_torque_figures
-    from physicalize.validate import validate
 
-    figures = validate(scene, roll, clip.qpos, objects)
     loads = None if ref.grasp is None else (ref.grasp.offset, ref.grasp.force)
-    figures.update(static_torque_figures(ref.qpos, loads, scene.profile.effort_limit, clip.fps))  # what the reference asks of the upper body
+    figures = static_torque_figures(ref.qpos, loads, scene.profile.effort_limit, fps)  # what the reference asks of the upper body
     if ref.grasp is None:
         held = outside = np.zeros(0, bool)
     else:
         held = ref.grasp.grasped.any(axis=1)
         outside = held & ~ref.grasp.friction_ok
     figures["reference_grasp_outside_friction_frac"] = float(outside.sum() / max(held.sum(), 1))  # of the held frames
-    if not figures["valid"] and outside.any():  # a cause no controller can overcome
-        figures["reason"] += f"; the hands' planned force leaves their friction cones from t={np.flatnonzero(outside)[0] / clip.fps:.2f} s"
+    cause = f"; the hands' planned force leaves their friction cones from t={np.flatnonzero(outside)[0] / fps:.2f} s" if outside.any() else ""
+    return figures, cause  # a cause no controller can overcome
+
+
+def _figures(scene, roll: Rollout, clip: RobotClip, objects, qpos0, qvel0, perturb, reference: tuple[dict, str]) -> dict:
+    """The validity figures of one rollout (:mod:`physicalize.validate`), its reference's figures
+    (:func:`_reference_figures`) and the open-loop replay check."""
+    from physicalize.rollout import replay
+    from physicalize.validate import validate
+
+    figures = validate(scene, roll, clip.qpos, objects)
+    figures.update(reference[0])
+    if not figures["valid"]:
+        figures["reason"] += reference[1]
     qs, _ = replay(scene.model, qpos0, qvel0, roll.action)
     figures["replay_err_max_m"] = float(np.abs(np.vstack([qs[:-1] - roll.qpos, qs[-1:] - roll.final_qpos])).max())
     if figures["replay_err_max_m"] > REPLAY_TOL_M and perturb is None:
@@ -189,13 +199,14 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
     scene, ref, objects, zmp = tracking_problem(clip, profile, reference, grasp)
     qpos0, qvel0 = initial_state(scene, ref, objects)
     tried, wall, cpu = [], time.perf_counter() - t0, time.process_time() - cpu0  # planning + tracking, every attempt (not the checks)
+    ref_figures = _reference_figures(scene, ref, clip.fps)
     for config in gains:
         t0, cpu0 = time.perf_counter(), time.process_time()
         roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile, config), qpos0, qvel0, contact_links=clip.contact_links,
                         perturb=perturb, residual=residual)  # fmt: skip
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
-        tried.append((roll, _figures(scene, ref, roll, clip, objects, qpos0, qvel0, perturb)))
-        if tried[-1][1]["valid"] or tried[-1][1]["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT:
+        tried.append((roll, _figures(scene, roll, clip, objects, qpos0, qvel0, perturb, ref_figures)))
+        if tried[-1][1]["valid"] or ref_figures[0]["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT:
             break
     kept = len(tried) - 1 if tried[-1][1]["valid"] else 0
     roll, figures = tried[kept]
