@@ -200,13 +200,15 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
     qpos0, qvel0 = initial_state(scene, ref, objects)
     tried, wall, cpu = [], time.perf_counter() - t0, time.process_time() - cpu0  # planning + tracking, every attempt (not the checks)
     ref_figures = _reference_figures(scene, ref, clip.fps)
+    if ref_figures[0]["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT:
+        gains = gains[:1]  # no gains make a pressing hand pull
     for config in gains:
         t0, cpu0 = time.perf_counter(), time.process_time()
         roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile, config), qpos0, qvel0, contact_links=clip.contact_links,
                         perturb=perturb, residual=residual)  # fmt: skip
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
         tried.append((roll, _figures(scene, roll, clip, objects, qpos0, qvel0, perturb, ref_figures)))
-        if tried[-1][1]["valid"] or ref_figures[0]["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT:
+        if tried[-1][1]["valid"]:
             break
     kept = len(tried) - 1 if tried[-1][1]["valid"] else 0
     roll, figures = tried[kept]
