@@ -15,7 +15,7 @@ JOBS ?= 1
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install retarget physicalize train-residual features test test-fast bench bench-retarget bench-physicalize bench-features clean-venv
+.PHONY: install lint format retarget physicalize train-residual features test test-fast bench bench-retarget bench-physicalize bench-features clean-venv
 
 install: $(VENV)/.installed
 
@@ -47,7 +47,16 @@ train-residual: install
 features: install
 	$(CLI) features --name $(NAME) $(if $(OVERWRITE),--overwrite)
 
-test: install
+# ruff (pinned in the dev extras, configured in pyproject.toml): `make format` rewrites, `make lint` checks.
+lint: install
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+format: install
+	$(VENV)/bin/ruff check --fix .
+	$(VENV)/bin/ruff format .
+
+test: lint
 	$(PY) -m pytest -n 2 --dist loadfile -q tests
 
 test-fast: install

@@ -40,9 +40,14 @@ FEATURES = [
 def make_episodes(n: int, T: int) -> list[Episode]:
     rng = np.random.default_rng(0)
     return [
-        Episode(f"task {k % 3}", {"observation.state": rng.normal(size=(T, 36)).astype(np.float32),
-                                  "observation.qvel": rng.normal(size=(T, 20)).astype(np.float32),
-                                  "contact": rng.random((T, 4)) < 0.5})  # fmt: skip
+        Episode(
+            f"task {k % 3}",
+            {
+                "observation.state": rng.normal(size=(T, 36)).astype(np.float32),
+                "observation.qvel": rng.normal(size=(T, 20)).astype(np.float32),
+                "contact": rng.random((T, 4)) < 0.5,
+            },
+        )
         for k in range(n)
     ]
 
@@ -90,7 +95,9 @@ def bench_loader_stock(root: Path, n_items: int) -> float:
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     keys = ["observation.state", "observation.qvel", "contact"]
-    ds = LeRobotDataset("bench/ours", root=root, delta_timestamps={k: [d / 50 for d in range(-HISTORY + 1, 1)] for k in keys})
+    ds = LeRobotDataset(
+        "bench/ours", root=root, delta_timestamps={k: [d / 50 for d in range(-HISTORY + 1, 1)] for k in keys}
+    )
     items = np.random.default_rng(0).integers(0, len(ds), n_items)
     t0 = time.perf_counter()
     for i in items:
@@ -111,8 +118,11 @@ def main() -> None:
     ours_root = tmp / "ours"
     import torch
 
-    print(f"data: {a.episodes} episodes x {a.frames} frames, 60 values/frame (36+20 float32, 4 bool); history {HISTORY}; "
-          f"{os.cpu_count()} CPUs, {torch.get_num_threads()} torch threads", flush=True)  # fmt: skip
+    print(
+        f"data: {a.episodes} episodes x {a.frames} frames, 60 values/frame (36+20 float32, 4 bool); history {HISTORY}; "
+        f"{os.cpu_count()} CPUs, {torch.get_num_threads()} torch threads",
+        flush=True,
+    )
     bench_write_ours(tmp / "warm_ours", eps[:1])  # warm-up (lazy imports) for both writers, untimed
     bench_write_stock(tmp / "warm_stock", [Episode(e.task, {k: v[:3] for k, v in e.data.items()}) for e in eps[:1]])
     w_ours = bench_write_ours(ours_root, eps)
@@ -120,12 +130,22 @@ def main() -> None:
     l_batch, l_item, t_open = bench_loader_ours(ours_root, a.batches)
     l_stock = bench_loader_stock(ours_root, a.stock_items)
     rows = [
-        ("write (frames/s)", f"{w_ours:,.0f}", f"{w_stock:,.0f}", f"{w_ours / w_stock:,.0f}x",
-         f"ours {a.episodes * a.frames} frames; stock {a.stock_episodes * a.frames}"),
-        ("load, batched (samples/s)", f"{l_batch:,.0f}", f"{l_stock:,.1f}", f"{l_batch / l_stock:,.0f}x",
-         f"batches of 1024; open {t_open:.2f} s; stock ds[i] x {a.stock_items}"),
+        (
+            "write (frames/s)",
+            f"{w_ours:,.0f}",
+            f"{w_stock:,.0f}",
+            f"{w_ours / w_stock:,.0f}x",
+            f"ours {a.episodes * a.frames} frames; stock {a.stock_episodes * a.frames}",
+        ),
+        (
+            "load, batched (samples/s)",
+            f"{l_batch:,.0f}",
+            f"{l_stock:,.1f}",
+            f"{l_batch / l_stock:,.0f}x",
+            f"batches of 1024; open {t_open:.2f} s; stock ds[i] x {a.stock_items}",
+        ),
         ("load, per item (samples/s)", f"{l_item:,.0f}", f"{l_stock:,.1f}", f"{l_item / l_stock:,.0f}x", "ds[i]"),
-    ]  # fmt: skip
+    ]
     head = ("measure", "ours", "stock lerobot", "speed-up", "notes")
     widths = [max(len(r[k]) for r in [head, *rows]) for k in range(5)]
     for r in [head, tuple("-" * w for w in widths), *rows]:

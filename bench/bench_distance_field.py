@@ -132,13 +132,29 @@ def bench_mesh(path: Path | None, n: int, repeat: int) -> None:
     box = RNG.uniform(mesh.bounds[0] - 1.0, mesh.bounds[1] + 1.0, (n, 3))
     frames = n // 20
     links = _approach(mesh, frames).reshape(-1, 3)
-    row("points", "method", "M points/CPU-s", "exact share", "phi err <=0.1 m max / mean (mm)", "phi err >0.1 m max / mean (mm)", "grad err outside p50 / p99 / max")
+    row(
+        "points",
+        "method",
+        "M points/CPU-s",
+        "exact share",
+        "phi err <=0.1 m max / mean (mm)",
+        "phi err >0.1 m max / mean (mm)",
+        "grad err outside p50 / p99 / max",
+    )
     row(*["---"] * 7)
     for name, p in [("near surface", near), ("bounds + 1 m", box), ("20 links x frames", links)]:
         e_phi, e_grad, e_c = _numpy_exact(shape, p)
         outside = ((p - e_c) * e_grad).sum(1) >= 0
         band = e_phi <= 0.1
-        row(name, "warp exact (BVH)", f"{rate(lambda: shape.exact(p, np), len(p), repeat) / 1e6:.2f}", "1.00", "0 / 0", "0 / 0", "0")
+        row(
+            name,
+            "warp exact (BVH)",
+            f"{rate(lambda: shape.exact(p, np), len(p), repeat) / 1e6:.2f}",
+            "1.00",
+            "0 / 0",
+            "0 / 0",
+            "0",
+        )
         phi, g, _, used = cached.detail(p, np)
         g = np.stack(g, 1)
         err = np.abs(phi - e_phi) * 1e3
@@ -146,13 +162,32 @@ def bench_mesh(path: Path | None, n: int, repeat: int) -> None:
         b = f"{err[band].max():.3f} / {err[band].mean():.4f}" if band.any() else "-"
         f = f"{err[~band].max():.3f} / {err[~band].mean():.4f}" if (~band).any() else "-"
         gq = f"{np.median(gerr):.4f} / {np.quantile(gerr, 0.99):.3f} / {gerr.max():.2f}"
-        row(name, "cached octree", f"{rate(lambda: cached.detail(p, np), len(p), repeat) / 1e6:.2f}", f"{used.mean():.3f}", b, f, gq)
+        row(
+            name,
+            "cached octree",
+            f"{rate(lambda: cached.detail(p, np), len(p), repeat) / 1e6:.2f}",
+            f"{used.mean():.3f}",
+            b,
+            f,
+            gq,
+        )
         m = 300
-        row(name, "trimesh closest_point" + ("" if _has_rtree() else "_naive (no rtree)"), f"{rate(lambda: _trimesh(mesh, p[:m]), m, 1) / 1e6:.4f}", "-", "-", "-", "-")
+        row(
+            name,
+            "trimesh closest_point" + ("" if _has_rtree() else "_naive (no rtree)"),
+            f"{rate(lambda: _trimesh(mesh, p[:m]), m, 1) / 1e6:.4f}",
+            "-",
+            "-",
+            "-",
+            "-",
+        )
     field = ObjectField(cached, "mesh")
     poses = np.tile(np.r_[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], (frames, 1))
     lk = links.reshape(frames, 20, 3)
-    print(f"\nObjectField.query_links (pose per frame, numpy in/out) on the approach: {rate(lambda: field.query_links(lk, poses), len(links), repeat) / 1e6:.2f} M link-queries/CPU-s")
+    print(
+        "\nObjectField.query_links (pose per frame, numpy in/out) on the approach: "
+        f"{rate(lambda: field.query_links(lk, poses), len(links), repeat) / 1e6:.2f} M link-queries/CPU-s"
+    )
 
 
 def _has_rtree() -> bool:

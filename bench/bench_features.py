@@ -42,11 +42,17 @@ def bench_stage(name: str) -> None:
     import json
 
     report = json.loads((stage_dir(name, "features") / "report.json").read_text())
-    print(f"\n## features stage on datasets/{name}/physicalized ({report['summary']['clips']} clips), per CPU-second, one process")
+    print(
+        f"\n## features stage on datasets/{name}/physicalized ({report['summary']['clips']} clips), per CPU-second, "
+        "one process"
+    )
     print("| clip | frames | frames/s | link-queries/s | min phi (m) |")
     print("|---|---|---|---|---|")
     for c in report["clips"]:
-        print(f"| {c['source']} | {c['frames']} | {c['frames_per_cpu_s']:.0f} | {c['link_queries_per_cpu_s'] / 1e3:.0f}k | {c['phi_min_m']:.3f} |")
+        print(
+            f"| {c['source']} | {c['frames']} | {c['frames_per_cpu_s']:.0f} | {c['link_queries_per_cpu_s'] / 1e3:.0f}k "
+            f"| {c['phi_min_m']:.3f} |"
+        )
     s = report["summary"]
     print(f"| total | {s['frames']} | {s['frames_per_cpu_s']:.0f} | | |")
     print(f"loading the objects' fields (meshes, warp), once per geometry: {s['fields_setup_cpu_s']:.1f} CPU-s")
@@ -58,7 +64,9 @@ def main() -> None:
     ap.add_argument("--points", type=int, default=1_000_000)
     ap.add_argument("--mesh-points", type=int, default=300_000)
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--name", default="bench-features", help="dataset name (made from the embedded default when missing)")
+    ap.add_argument(
+        "--name", default="bench-features", help="dataset name (made from the embedded default when missing)"
+    )
     a = ap.parse_args()
     import torch
 

@@ -31,7 +31,6 @@ import numpy as np  # noqa: E402
 
 from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES, actuator_profile, default_qpos  # noqa: E402
 from pipeline.scene import Scene, SceneObject, build_scene  # noqa: E402
-
 from retarget.ik import G1Retargeter, targets_from_qpos  # noqa: E402
 from retarget.ik_config import IKConfig  # noqa: E402
 
@@ -72,7 +71,9 @@ def demo_qpos(
     for side in ("left", "right"):
         q[:, j[f"{side}_hip_pitch_joint"]] -= a
         q[:, j[f"{side}_knee_joint"]] += 2 * a
-        q[:, j[f"{side}_ankle_pitch_joint"]] = -(q[:, j[f"{side}_hip_pitch_joint"]] + q[:, j[f"{side}_knee_joint"]])  # sole level
+        q[:, j[f"{side}_ankle_pitch_joint"]] = -(
+            q[:, j[f"{side}_hip_pitch_joint"]] + q[:, j[f"{side}_knee_joint"]]
+        )  # sole level
     r = reach * _smooth(2 * s) * _smooth(2 - 2 * s)  # up and back down
     q[:, j["right_shoulder_pitch_joint"]] -= 1.4 * r
     q[:, j["right_elbow_joint"]] -= 0.5 * r
@@ -81,7 +82,9 @@ def demo_qpos(
     q[:, j["waist_yaw_joint"]] = 0.3 * np.sin(2 * math.pi * s)
     lo, hi = model.jnt_range[1:30].T  # joints 1..29 of g1.xml are G1_JOINT_NAMES (joint 0: the root)
     if (q[:, 7:] < lo).any() or (q[:, 7:] > hi).any():
-        raise ValueError(f"demo_qpos: squat {squat} / reach {reach} leave the joint range (ankle pitch limit: squat <= ~0.5)")
+        raise ValueError(
+            f"demo_qpos: squat {squat} / reach {reach} leave the joint range (ankle pitch limit: squat <= ~0.5)"
+        )
     yaw = yaw0 + turn * _smooth(s)
     q[:, 3], q[:, 6] = np.cos(yaw / 2), np.sin(yaw / 2)
     path = travel * _smooth(s)[:, None] * np.array([math.cos(yaw0), math.sin(yaw0)])
@@ -97,7 +100,9 @@ def demo_qpos(
     return q
 
 
-def march_qpos(model: mujoco.MjModel, frames: int = 300, steps: int = 6, lift: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+def march_qpos(
+    model: mujoco.MjModel, frames: int = 300, steps: int = 6, lift: float = 0.5
+) -> tuple[np.ndarray, np.ndarray]:
     """Marching in place: ``(frames, 36)`` qpos and ``(frames, 2)`` foot contacts (left, right).
 
     Step ``k`` of ``steps`` lifts the left leg (even ``k``) or the right one by ``b = lift sin^2``
@@ -117,7 +122,10 @@ def march_qpos(model: mujoco.MjModel, frames: int = 300, steps: int = 6, lift: f
         q[:, j[f"{side}_ankle_pitch_joint"]] = -(q[:, j[f"{side}_hip_pitch_joint"]] + q[:, j[f"{side}_knee_joint"]])
         q[:, j[f"{side}_shoulder_pitch_joint"]] += 0.8 * np.where(k % 2 == parity, bump, -bump)  # arms swing
     data = mujoco.MjData(model)
-    caps = [[g for g in range(model.ngeom) if model.geom(g).name.startswith(f"{side}_foot") and model.geom_contype[g]] for side in ("left", "right")]
+    caps = [
+        [g for g in range(model.ngeom) if model.geom(g).name.startswith(f"{side}_foot") and model.geom_contype[g]]
+        for side in ("left", "right")
+    ]
     contact = np.zeros((frames, 2), bool)
     for t in range(frames):
         q[t, 2] = 0.0
@@ -135,7 +143,8 @@ def _default_qpos() -> np.ndarray:
 
 
 def box_for_reach(model: mujoco.MjModel, qpos: np.ndarray, depth: float = 0.05, half: float = 0.1) -> tuple[float, ...]:
-    """Pose of a ``half``-size box whose near face is ``depth`` behind the right hand capsule's farthest forward point."""
+    """Pose of a ``half``-size box whose near face is ``depth`` behind the right hand capsule's farthest forward
+    point."""
     data = mujoco.MjData(model)
     g = model.geom("right_hand_collision").id
     best, pose = -np.inf, None
@@ -146,7 +155,10 @@ def box_for_reach(model: mujoco.MjModel, qpos: np.ndarray, depth: float = 0.05, 
         fwd = np.array([math.cos(yaw), math.sin(yaw), 0.0])
         reach = (data.geom_xpos[g] - qpos[t, :3]) @ fwd + model.geom_size[g, 1] + model.geom_size[g, 0]
         if reach > best:
-            best, centre = reach, data.geom_xpos[g] + fwd * (model.geom_size[g, 1] + model.geom_size[g, 0] - depth + half)
+            best, centre = (
+                reach,
+                data.geom_xpos[g] + fwd * (model.geom_size[g, 1] + model.geom_size[g, 0] - depth + half),
+            )
             pose = (*centre, math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
     return pose
 
@@ -160,7 +172,9 @@ def box_scene(model: mujoco.MjModel, qpos: np.ndarray, depth: float = 0.05) -> t
     return scene, np.tile(np.array(pose), (len(qpos), 1))
 
 
-def _run(name: str, scene: Scene, targets, objects_pose, config: IKConfig, qpos_true: np.ndarray, profile: bool, repeat: int) -> None:
+def _run(
+    name: str, scene: Scene, targets, objects_pose, config: IKConfig, qpos_true: np.ndarray, profile: bool, repeat: int
+) -> None:
     ik = G1Retargeter(scene, config)
     ik.retarget(targets, objects_pose)  # warm-up (imports, first-call costs)
     rates = []
@@ -169,8 +183,10 @@ def _run(name: str, scene: Scene, targets, objects_pose, config: IKConfig, qpos_
         rates.append(ik.stats["frames_per_s"])
     st = ik.stats
     err = _position_error(ik.model, q, qpos_true, targets.body_names)
-    print(f"{name:28s} {np.median(rates):6.0f} (best {max(rates):5.0f}) frames/s  {st['qp_solves'] / st['frames']:.2f} QP/frame  "
-          f"body pos err mean {1000 * err.mean():.1f} mm, max {1000 * err.max():.1f} mm")  # fmt: skip
+    print(
+        f"{name:28s} {np.median(rates):6.0f} (best {max(rates):5.0f}) frames/s  {st['qp_solves'] / st['frames']:.2f} "
+        f"QP/frame  body pos err mean {1000 * err.mean():.1f} mm, max {1000 * err.max():.1f} mm"
+    )
     if profile:
         prof = cProfile.Profile()
         prof.enable()
@@ -195,8 +211,20 @@ def _position_error(model, q, q_true, bodies) -> np.ndarray:
 
 _GROUPS = {
     "QP solve (qpsolvers + daqp)": ("qpsolvers",),
-    "task errors + Jacobians": ("frame_task.py", "posture_task.py", "tasks/task.py", "get_frame_jacobian", "_get_transform", "_lie_ops"),
-    "collision distances + rows": ("ik_config.py:compute_qp_inequalities", "collision_avoidance_limit.py", "mj_geomDistance", "mj_jac"),
+    "task errors + Jacobians": (
+        "frame_task.py",
+        "posture_task.py",
+        "tasks/task.py",
+        "get_frame_jacobian",
+        "_get_transform",
+        "_lie_ops",
+    ),
+    "collision distances + rows": (
+        "ik_config.py:compute_qp_inequalities",
+        "collision_avoidance_limit.py",
+        "mj_geomDistance",
+        "mj_jac",
+    ),
     "forward kinematics": ("mj_kinematics", "mj_comPos", "mj_integratePos"),
 }
 
@@ -213,7 +241,10 @@ def _split(prof: cProfile.Profile) -> None:
     prof_total = sum(v[2] for v in st.stats.values())
     for g, v in sums.items():
         print(f"    {g:32s} {100 * v / prof_total:5.1f} %")
-    print(f"    {'QP assembly, limits, glue':32s} {100 * (1 - sum(sums.values()) / prof_total):5.1f} %   (of {prof_total:.2f} s under the profiler)")
+    print(
+        f"    {'QP assembly, limits, glue':32s} {100 * (1 - sum(sums.values()) / prof_total):5.1f} %   (of "
+        f"{prof_total:.2f} s under the profiler)"
+    )
 
 
 def trimesh_bounds(path: str) -> np.ndarray:
@@ -229,17 +260,24 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--tolerance", type=float, default=IKConfig.tolerance, help="0: always take --iterations steps")
     ap.add_argument("--repeat", type=int, default=5, help="timed runs per case (median and best reported)")
     ap.add_argument("--mesh", help="also: this mesh object (e.g. OMOMO's largebox.obj) in the right hand's way")
-    ap.add_argument("--collision", default="hull", choices=("hull", "decomposition"), help="how the physics sees --mesh")
+    ap.add_argument(
+        "--collision", default="hull", choices=("hull", "decomposition"), help="how the physics sees --mesh"
+    )
     ap.add_argument("--profile", action="store_true")
     args = ap.parse_args(argv)
     config = IKConfig(iterations=args.iterations, tolerance=args.tolerance)
     plain = build_scene()
     q = demo_qpos(plain.model, args.frames)
     targets = targets_from_qpos(plain.model, q, G1_LINK_NAMES, fps=30.0)
-    print(f"G1 IK, {args.frames} frames at 30 fps, {len(G1_LINK_NAMES)} frame tasks, up to {args.iterations} QP steps/frame (tolerance {args.tolerance}), 1 thread")
+    print(
+        f"G1 IK, {args.frames} frames at 30 fps, {len(G1_LINK_NAMES)} frame tasks, up to {args.iterations} QP "
+        f"steps/frame (tolerance {args.tolerance}), 1 thread"
+    )
     _run("no object", plain, targets, None, config, q, args.profile, args.repeat)
     q_still = demo_qpos(plain.model, args.frames, turn=0.0, travel=0.0)
-    t_still = targets_from_qpos(plain.model, q_still, G1_LINK_NAMES, fps=30.0, foot_contact=np.ones((args.frames, 2), bool))
+    t_still = targets_from_qpos(
+        plain.model, q_still, G1_LINK_NAMES, fps=30.0, foot_contact=np.ones((args.frames, 2), bool)
+    )
     _run("no object, feet pinned", plain, t_still, None, config, q_still, args.profile, args.repeat)
     q_march, contact = march_qpos(plain.model, args.frames)
     t_march = targets_from_qpos(plain.model, q_march, G1_LINK_NAMES, fps=30.0, foot_contact=contact)
@@ -256,8 +294,20 @@ def main(argv: list[str] | None = None) -> None:
         half = float(np.max(np.abs(trimesh_bounds(args.mesh))))
         pose = box_for_reach(plain.model, q, depth=0.05, half=half)
         scene = build_scene([SceneObject("mesh", geo, pose=pose)])
-        n = sum(scene.model.geom_bodyid[g] == scene.model.body("mesh").id and scene.model.geom_contype[g] > 0 for g in range(scene.model.ngeom))
-        _run(f"mesh ({args.collision}, {n} pieces)", scene, targets, {"mesh": np.tile(np.array(pose), (len(q), 1))}, config, q, args.profile, args.repeat)
+        n = sum(
+            scene.model.geom_bodyid[g] == scene.model.body("mesh").id and scene.model.geom_contype[g] > 0
+            for g in range(scene.model.ngeom)
+        )
+        _run(
+            f"mesh ({args.collision}, {n} pieces)",
+            scene,
+            targets,
+            {"mesh": np.tile(np.array(pose), (len(q), 1))},
+            config,
+            q,
+            args.profile,
+            args.repeat,
+        )
 
 
 if __name__ == "__main__":

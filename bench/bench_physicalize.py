@@ -4,7 +4,8 @@ CoM) and ``feasible`` (the whole body re-solved by IK onto the plan: the stage's
 ``feasible/g0``: the feasible reference with the base teacher's first QP gain set only (the other rows try
 the sets of :data:`physicalize.wbc_config.TEACHER_GAINS` in order and keep the first valid rollout; ``gains`` is the
 set kept, ``tries`` how many ran), and ``feasible+res``: the feasible reference with the base teacher plus a
-learned residual trained on that clip at SMOKE scale (``--residual-iterations`` x 16 envs of PPO on one core, default 50; 0
+learned residual trained on that clip at SMOKE scale (``--residual-iterations`` x 16 envs of PPO on one core, default
+50; 0
 skips it; training time not in ``rt``).
 
 Run: ``make bench-physicalize``. Clips: the four embedded default clips and, when ``../shared/mocap``
@@ -14,7 +15,8 @@ scene build, reference, plan and closed-loop tracking on one core). ``rt`` is si
 per wall second, ``rt/core`` per CPU second (robust to a shared, loaded machine: everything runs on one
 thread); the issue's bar is >= 5 per core. ``ref tau``: the largest static torque the tracked reference asks of an
 upper-body motor, as a fraction of its limit (:mod:`physicalize.static_torque`); ``grip out``: the share of held frames
-whose planned hand forces leave the hands' friction cones (:func:`physicalize.grasp.press_force`). First, a robustness table:
+whose planned hand forces leave the hands' friction cones (:func:`physicalize.grasp.press_force`). First, a robustness
+table:
 per default task, the valid count over ``--seeds`` synthetic seeds (each moves the objects a few cm). Then the
 teacher's gait envelope: 10-step G1 walks (:func:`physicalize.synthetic_gait.walk_with_turn`, straight and turning 90
 degrees) over step length x (swing, double support) timing, each cell ``ok`` (walked to the end, root within 0.25 m
@@ -53,13 +55,31 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
 GAIT_STEPS_M = (0.1, 0.2, 0.3, 0.4, 0.5)  # centre-line advance per step (each foot moves twice that)
 GAIT_TIMINGS_S = ((0.35, 0.10), (0.40, 0.10), (0.45, 0.12), (0.50, 0.15), (0.60, 0.20))  # (swing, double support)
 GAIT_TURNS_RAD = (0.0, np.pi / 2)
-MASSES_KG = (0.5, 1.0, 1.5, 2.5, 3.0)  # object masses of the sweep (the scene's default is 2 kg where the input gives none)
+MASSES_KG = (
+    0.5,
+    1.0,
+    1.5,
+    2.5,
+    3.0,
+)  # object masses of the sweep (the scene's default is 2 kg where the input gives none)
 REAL = ["omomo/sub3_largebox_003.pt", "intermimic/sub2_largetable_000.pt", "bvh/pymo_walk_120hz.bvh"]
-COLUMNS = [("valid", "valid"), ("fell", "fell"), ("frames_simulated", "sim/ref"), ("mpjpe_m", "mpjpe"), ("root_pos_err_max_m", "root max"),
-           ("foot_slide_frac_1cm_per_frame", "slide"), ("penetration_max_m", "pen max"), ("torque_saturation_frac", "sat"),
-           ("object_pos_err_m", "obj err"), ("reference_static_torque_ratio_max", "ref tau"),
-           ("reference_grasp_outside_friction_frac", "grip out"), ("teacher_gains", "gains"), ("teacher_attempts", "tries"), ("realtime_factor", "rt"),
-           ("realtime_factor_per_core", "rt/core")]  # fmt: skip
+COLUMNS = [
+    ("valid", "valid"),
+    ("fell", "fell"),
+    ("frames_simulated", "sim/ref"),
+    ("mpjpe_m", "mpjpe"),
+    ("root_pos_err_max_m", "root max"),
+    ("foot_slide_frac_1cm_per_frame", "slide"),
+    ("penetration_max_m", "pen max"),
+    ("torque_saturation_frac", "sat"),
+    ("object_pos_err_m", "obj err"),
+    ("reference_static_torque_ratio_max", "ref tau"),
+    ("reference_grasp_outside_friction_frac", "grip out"),
+    ("teacher_gains", "gains"),
+    ("teacher_attempts", "tries"),
+    ("realtime_factor", "rt"),
+    ("realtime_factor_per_core", "rt/core"),
+]
 
 
 def _clips():
@@ -95,7 +115,11 @@ def _seed_table(n: int) -> None:
     print(f"robustness over synthetic seeds 0-{n - 1} (feasible reference, base teacher):")
     for task, runs in counts.items():
         bad = [f"seed {s}: {f['reason'][:50]}" for s, f in runs if not f["valid"]]
-        print(f"  {task:9s} valid {sum(f['valid'] for _, f in runs)}/{len(runs)}" + (f"  ({'; '.join(bad[:3])}{' ...' if len(bad) > 3 else ''})" if bad else ""), flush=True)
+        print(
+            f"  {task:9s} valid {sum(f['valid'] for _, f in runs)}/{len(runs)}"
+            + (f"  ({'; '.join(bad[:3])}{' ...' if len(bad) > 3 else ''})" if bad else ""),
+            flush=True,
+        )
 
 
 def _gait_cell(scene, step_m: float, swing_s: float, double_s: float, turn_rad: float) -> str:
@@ -105,7 +129,9 @@ def _gait_cell(scene, step_m: float, swing_s: float, double_s: float, turn_rad: 
     ref = gait_reference(scene, qpos)
     first = None
     for k, gains in enumerate(TEACHER_GAINS):
-        roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile, gains), *initial_state(scene, ref, {}))
+        roll = simulate(
+            scene, ref, WholeBodyController(scene.model, scene.profile, gains), *initial_state(scene, ref, {})
+        )
         root_err = np.linalg.norm(roll.qpos[:, :2] - ref.qpos[: roll.frames, :2], axis=1)
         if roll.fell_at is None and root_err.max() <= 0.25:
             return "ok" if k == 0 else f"ok g{k}"
@@ -120,13 +146,23 @@ def _gait_table() -> None:
     scene = build_scene()
     cells = []
     for turn in GAIT_TURNS_RAD:
-        print(f"gait envelope, 10 steps turning {np.degrees(turn):.0f} deg (ok, ok gK: walked by gain set K, else the fraction the first set walked):")
+        print(
+            f"gait envelope, 10 steps turning {np.degrees(turn):.0f} deg (ok, ok gK: walked by gain set K, else the "
+            "fraction the first set walked):"
+        )
         print(f"  {'swing/ds [s]':14s}" + "".join(f"{f'{s:.1f} m':>18s}" for s in GAIT_STEPS_M))
         for swing, ds in GAIT_TIMINGS_S:
             row = [_gait_cell(scene, s, swing, ds, turn) for s in GAIT_STEPS_M]
             cells += row
-            print(f"  {f'{swing:.2f}/{ds:.2f}':14s}" + "".join(f"{f'{c} ({s / (swing + ds):.2f} m/s)':>18s}" for c, s in zip(row, GAIT_STEPS_M)), flush=True)
-    print(f"gait envelope: {cells.count('ok')}/{len(cells)} walks with the first gain set, {sum(c.startswith('ok') for c in cells)}/{len(cells)} with any")
+            print(
+                f"  {f'{swing:.2f}/{ds:.2f}':14s}"
+                + "".join(f"{f'{c} ({s / (swing + ds):.2f} m/s)':>18s}" for c, s in zip(row, GAIT_STEPS_M)),
+                flush=True,
+            )
+    print(
+        f"gait envelope: {cells.count('ok')}/{len(cells)} walks with the first gain set, "
+        f"{sum(c.startswith('ok') for c in cells)}/{len(cells)} with any"
+    )
 
 
 def _mass_table(robots: list) -> None:
@@ -141,13 +177,26 @@ def _mass_table(robots: list) -> None:
         for kg in MASSES_KG:
             f = physicalize_clip(replace(robot, objects=tuple(replace(o, mass=kg) for o in robot.objects)))[2]
             cells.append("ok" if f["valid"] else f["reason"].split(";")[0][:24])
-        print(f"  {name:24s}" + "".join(f"{c:>26s}" for c in cells) + f"  valid {cells.count('ok')}/{len(cells)}", flush=True)
+        print(
+            f"  {name:24s}" + "".join(f"{c:>26s}" for c in cells) + f"  valid {cells.count('ok')}/{len(cells)}",
+            flush=True,
+        )
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--residual-iterations", type=int, default=50, help="PPO iterations (x 16 envs) of the smoke residual per clip; 0: skip")
-    ap.add_argument("--seeds", type=int, default=10, help="synthetic seeds 0..N-1 of the robustness table (feasible reference, base teacher); 0: skip")
+    ap.add_argument(
+        "--residual-iterations",
+        type=int,
+        default=50,
+        help="PPO iterations (x 16 envs) of the smoke residual per clip; 0: skip",
+    )
+    ap.add_argument(
+        "--seeds",
+        type=int,
+        default=10,
+        help="synthetic seeds 0..N-1 of the robustness table (feasible reference, base teacher); 0: skip",
+    )
     ap.add_argument("--no-gait", action="store_true", help="skip the gait envelope table")
     ap.add_argument("--no-mass", action="store_true", help="skip the object mass sweep")
     args = ap.parse_args()
@@ -169,14 +218,24 @@ def main() -> None:
                     ckpt = train_residual(robot, args.residual_iterations, 16, 0, Path(tmp) / "residual.pt")
                     _, roll, f, _ = physicalize_clip(robot, teacher=f"base+residual:{ckpt}")
                 else:
-                    _, roll, f, _ = physicalize_clip(robot, reference=kind.split("/")[0], gains=TEACHER_GAINS[:1] if kind.endswith("/g0") else None)
+                    _, roll, f, _ = physicalize_clip(
+                        robot, reference=kind.split("/")[0], gains=TEACHER_GAINS[:1] if kind.endswith("/g0") else None
+                    )
                 valid[kind].append(f["valid"])
                 sim = roll.frames / robot.fps
                 seconds[kind] = [seconds[kind][0] + sim, seconds[kind][1] + sim / f["realtime_factor_per_core"]]
-                print(f"{name:24s}{kind:14s}" + "".join(f"{_cell(k, f):>10s}" for k, _ in COLUMNS) + f"  {f['reason'][:60]}", flush=True)
+                print(
+                    f"{name:24s}{kind:14s}"
+                    + "".join(f"{_cell(k, f):>10s}" for k, _ in COLUMNS)
+                    + f"  {f['reason'][:60]}",
+                    flush=True,
+                )
     for kind, v in valid.items():
         sim, cpu = seconds[kind]
-        print(f"valid fraction ({kind}): {sum(v)}/{len(v)} = {sum(v) / max(len(v), 1):.2f}; the whole pass {sim / max(cpu, 1e-9):.2f}x real time per core")
+        print(
+            f"valid fraction ({kind}): {sum(v)}/{len(v)} = {sum(v) / max(len(v), 1):.2f}; the whole pass "
+            f"{sim / max(cpu, 1e-9):.2f}x real time per core"
+        )
 
 
 if __name__ == "__main__":

@@ -27,12 +27,18 @@ from retarget.stage import retarget_clip  # noqa: E402
 REPEATS = 3
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
 COLUMNS = [
-    ("object_penetration_frac_1cm", "obj>1cm"), ("object_penetration_max_m", "obj max"),
-    ("ground_penetration_frac_1cm", "gnd>1cm"), ("float_frac_2cm", "float"),
-    ("foot_slide_frac_1cm_per_frame", "slide"), ("foot_slide_speed_max_mps", "slide m/s"),
-    ("contact_preservation_frac", "contact"), ("joint_limit_violation_frac", "limits"),
-    ("max_joint_speed_radps", "max rad/s"), ("self_collision_frac", "self"), ("frames", "frames"),
-]  # fmt: skip
+    ("object_penetration_frac_1cm", "obj>1cm"),
+    ("object_penetration_max_m", "obj max"),
+    ("ground_penetration_frac_1cm", "gnd>1cm"),
+    ("float_frac_2cm", "float"),
+    ("foot_slide_frac_1cm_per_frame", "slide"),
+    ("foot_slide_speed_max_mps", "slide m/s"),
+    ("contact_preservation_frac", "contact"),
+    ("joint_limit_violation_frac", "limits"),
+    ("max_joint_speed_radps", "max rad/s"),
+    ("self_collision_frac", "self"),
+    ("frames", "frames"),
+]
 
 
 def _fmt(v) -> str:
@@ -45,7 +51,11 @@ def main() -> int:
     rows = []
     sources = []
     if SHARED.is_dir():
-        sources += [SHARED / "omomo" / "sub3_largebox_003.pt", SHARED / "intermimic" / "sub2_largetable_000.pt", SHARED / "bvh" / "pymo_walk_120hz.bvh"]
+        sources += [
+            SHARED / "omomo" / "sub3_largebox_003.pt",
+            SHARED / "intermimic" / "sub2_largetable_000.pt",
+            SHARED / "bvh" / "pymo_walk_120hz.bvh",
+        ]
     clips = [read_clips(p)[0] for p in sources if p.is_file()] + default_clips()
     retarget_clip(default_clips(fps=30.0)[2])  # warm-up, untimed: MuJoCo's first G1 compile takes ~3 s per process
     for clip in clips:

@@ -47,7 +47,9 @@ class FeatureConfig:
         if not self.links or len(set(self.links)) != len(self.links):
             raise InputError(None, "links", f"need distinct link names, got {list(self.links)}")
         if self.root_horizon_s <= 0 or self.history < 1 or self.demo_max_distance_m <= 0:
-            raise InputError(None, "features config", "root_horizon_s and demo_max_distance_m must be > 0 and history >= 1")
+            raise InputError(
+                None, "features config", "root_horizon_s and demo_max_distance_m must be > 0 and history >= 1"
+            )
 
 
 @dataclass(frozen=True)
@@ -78,7 +80,9 @@ class FieldCache:
             key = json.dumps(geometry_to_dict(o.geometry), sort_keys=True) + o.name
             if key not in self._fields:
                 try:
-                    field = ObjectField.from_geometry(o.geometry, o.name, **({"cache": False} if isinstance(o.geometry, MeshGeometry) else {}))
+                    field = ObjectField.from_geometry(
+                        o.geometry, o.name, **({"cache": False} if isinstance(o.geometry, MeshGeometry) else {})
+                    )
                     field.query(np.zeros((1, 3)), np.array([0.0, 0, 0, 1, 0, 0, 0]))  # loads the query kernels now
                     self._fields[key] = field
                 except InputError as exc:
@@ -100,11 +104,15 @@ def clip_features(clip: PhysicalizedClip, cfg: FeatureConfig, cache: FieldCache 
     k_df = [links.index(n) for n in cfg.links]
     k_demo = [links.index(n) for n in cfg.demo_links]
     phi, grad, vel = near.phi[:, k_df], near.grad[:, k_df], motion.vel[:, k_df]
-    v_surface = surface_point_velocity(near.closest[:, k_df], near.object_index[:, k_df], poses, np.stack(clip.object_vel, axis=1))
+    v_surface = surface_point_velocity(
+        near.closest[:, k_df], near.object_index[:, k_df], poses, np.stack(clip.object_vel, axis=1)
+    )
     return ClipFeatures(
         df=interaction_features(phi, grad, vel),
         df_relative=interaction_features(phi, grad, vel - v_surface),
-        df_demo=demo_features(near.phi[:, k_demo], near.grad[:, k_demo], motion.rot[:, k_demo], cfg.demo_max_distance_m),
+        df_demo=demo_features(
+            near.phi[:, k_demo], near.grad[:, k_demo], motion.rot[:, k_demo], cfg.demo_max_distance_m
+        ),
         object_index=near.object_index[:, k_df],
         root_command=root_command(robot.qpos, clip.qvel, robot.fps, cfg.root_horizon_s),
         proprio=proprioception(robot.qpos, clip.qvel, clip.action),

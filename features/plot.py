@@ -34,7 +34,9 @@ def plot_df(df: np.ndarray, contact: np.ndarray | None, fps: float, title: str, 
     if contact is not None and contact.any():
         edges = np.flatnonzero(np.diff(contact.astype(np.int8))) + 1
         for ax in axes:
-            ax.fill_between(t, 0, 1, where=contact, transform=ax.get_xaxis_transform(), color="tab:green", alpha=0.1, lw=0)
+            ax.fill_between(
+                t, 0, 1, where=contact, transform=ax.get_xaxis_transform(), color="tab:green", alpha=0.1, lw=0
+            )
             for e in edges:
                 ax.axvline(t[e], color="k", ls="--", lw=0.8)
         axes[0].plot([], [], color="tab:green", alpha=0.3, lw=6, label="contact")

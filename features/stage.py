@@ -29,45 +29,82 @@ from pipeline.observations import PROPRIO_NAMES, ROOT_COMMAND_NAMES
 from pipeline.robot import g1_model
 
 CARD_NOTES = [
-    "DF features follow LessMimic Sec. III-A: per link, phi = unsigned distance from the link's body origin to the nearest "
-    "object surface (exact: analytic primitives, warp closest point or a cached adaptive octree for meshes), grad = unit "
-    "direction from the closest surface point (the outward normal on and inside the surface), v_norm = (v . grad) grad and "
-    "v_tan = v - v_norm with v the link's linear velocity from the simulated state (MuJoCo kinematics, not finite differences).",
+    "DF features follow LessMimic Sec. III-A: per link, phi = unsigned distance from the link's body origin to the "
+    "nearest object surface (exact: analytic primitives, warp closest point or a cached adaptive octree for meshes), "
+    "grad = unit direction from the closest surface point (the outward normal on and inside the surface), v_norm = "
+    "(v . grad) grad and v_tan = v - v_norm with v the link's linear velocity from the simulated state (MuJoCo "
+    "kinematics, not finite differences).",
     "The interaction window I_t is not stored: load it with LeRobot's `delta_timestamps`, e.g. "
-    "`{'observation.df': [-0.08, -0.06, -0.04, -0.02, 0.0]}` for l = 5 at 50 fps (frames before the episode start are padded "
-    "and flagged `*_is_pad`), or with `pipeline.dataset_read.WindowDataset(root, keys, history=5)`.",
-    "`observation.df_demo` is the input contract of the released LessMimic web demo: for its 7 query bodies, min(phi, 1 m) "
-    "and grad in the body's own frame.",
+    "`{'observation.df': [-0.08, -0.06, -0.04, -0.02, 0.0]}` for l = 5 at 50 fps (frames before the episode start are "
+    "padded and flagged `*_is_pad`), or with `pipeline.dataset_read.WindowDataset(root, keys, history=5)`.",
+    "`observation.df_demo` is the input contract of the released LessMimic web demo: for its 7 query bodies, "
+    "min(phi, 1 m) and grad in the body's own frame.",
 ]
 
 
 def _features(cfg: FeatureConfig, objects: list[str]) -> list[Feature]:
     out = [
-        Feature("observation.df", "float32", feature_names(cfg.links, DF_PARTS), "u_t per link: phi, grad phi, v_norm, v_tan", "m, 1, m/s"),
-        Feature("observation.df_relative", "float32", feature_names(cfg.links, DF_PARTS),
-                "u_t per link with v relative to the velocity of the object's closest surface point", "m, 1, m/s"),
-        Feature("observation.df_demo", "float32", feature_names(cfg.demo_links, DEMO_PARTS),
-                f"released-demo layout per query body: min(phi, {cfg.demo_max_distance_m:g} m), grad phi in the body frame", "m, 1"),
-        Feature("observation.root_command", "float32", ROOT_COMMAND_NAMES,
-                f"sparse root target {cfg.root_horizon_s:g} s ahead: position delta, 6-D rotation, target velocity", "m, 1, m/s"),
-        Feature("observation.proprio", "float32", PROPRIO_NAMES, "joint angles, joint velocities, gravity and angular velocity "
-                "in the root frame, previous action", "rad, rad/s, 1, rad/s, rad"),
-    ]  # fmt: skip
+        Feature(
+            "observation.df",
+            "float32",
+            feature_names(cfg.links, DF_PARTS),
+            "u_t per link: phi, grad phi, v_norm, v_tan",
+            "m, 1, m/s",
+        ),
+        Feature(
+            "observation.df_relative",
+            "float32",
+            feature_names(cfg.links, DF_PARTS),
+            "u_t per link with v relative to the velocity of the object's closest surface point",
+            "m, 1, m/s",
+        ),
+        Feature(
+            "observation.df_demo",
+            "float32",
+            feature_names(cfg.demo_links, DEMO_PARTS),
+            f"released-demo layout per query body: min(phi, {cfg.demo_max_distance_m:g} m), grad phi in the body frame",
+            "m, 1",
+        ),
+        Feature(
+            "observation.root_command",
+            "float32",
+            ROOT_COMMAND_NAMES,
+            f"sparse root target {cfg.root_horizon_s:g} s ahead: position delta, 6-D rotation, target velocity",
+            "m, 1, m/s",
+        ),
+        Feature(
+            "observation.proprio",
+            "float32",
+            PROPRIO_NAMES,
+            "joint angles, joint velocities, gravity and angular velocity in the root frame, previous action",
+            "rad, rad/s, 1, rad/s, rad",
+        ),
+    ]
     if len(objects) > 1:
-        out.append(Feature("observation.df_object", "int64", cfg.links, f"index of the nearest object per link, in {objects}"))
+        out.append(
+            Feature("observation.df_object", "int64", cfg.links, f"index of the nearest object per link, in {objects}")
+        )
     return out
 
 
 _FRAMES = {
-    "observation.df": "world, z-up", "observation.df_relative": "world, z-up", "observation.df_demo": "query body frame (grad)",
-    "observation.root_command": "root heading frame at t (yaw only)", "observation.proprio": "joint space; root frame (gravity, angular velocity)",
-}  # fmt: skip
+    "observation.df": "world, z-up",
+    "observation.df_relative": "world, z-up",
+    "observation.df_demo": "query body frame (grad)",
+    "observation.root_command": "root heading frame at t (yaw only)",
+    "observation.proprio": "joint space; root frame (gravity, angular velocity)",
+}
 
 
 def _data(f: ClipFeatures, several: bool) -> dict[str, np.ndarray]:
     T = len(f.df)
-    data = {"observation.df": f.df.reshape(T, -1), "observation.df_relative": f.df_relative.reshape(T, -1),
-            "observation.df_demo": f.df_demo.reshape(T, -1), "observation.root_command": f.root_command, "observation.proprio": f.proprio}  # fmt: skip
+    data = {
+        "observation.df": f.df.reshape(T, -1),
+        "observation.df_relative": f.df_relative.reshape(T, -1),
+        "observation.df_demo": f.df_demo.reshape(T, -1),
+        "observation.root_command": f.root_command,
+        "observation.proprio": f.proprio,
+    }
     if several:
         data["observation.df_object"] = f.object_index
     return data
@@ -97,12 +134,24 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
     if not (src / "meta" / "info.json").is_file():
         ran = src.parent / "logs" / "physicalized" / "report.json"
         if not ran.is_file():
-            raise InputError(src, "meta/info.json", "no physicalized dataset here: run `lessmimic physicalize --name NAME` first")
+            raise InputError(
+                src, "meta/info.json", "no physicalized dataset here: run `lessmimic physicalize --name NAME` first"
+            )
         # The physicalize stage ran and kept no clip (none valid): a measured outcome, not an error.
-        why = (f"nothing to do: the physicalize stage kept no clip (none valid; see {ran}); "
-               "`make physicalize KEEP_INVALID=1 OVERWRITE=1` keeps invalid clips with their validation figures")  # fmt: skip
-        return {"stage": "features", "skipped": why, "clips": [], "summary": {"clips": 0, "frames": 0, "frames_per_cpu_s": 0.0}}
-    fp, logs = fingerprint(stage="features", physicalized=dataset_fingerprint(src), config=asdict(cfg)), out.parent / "logs" / "features"
+        why = (
+            f"nothing to do: the physicalize stage kept no clip (none valid; see {ran}); "
+            "`make physicalize KEEP_INVALID=1 OVERWRITE=1` keeps invalid clips with their validation figures"
+        )
+        return {
+            "stage": "features",
+            "skipped": why,
+            "clips": [],
+            "summary": {"clips": 0, "frames": 0, "frames_per_cpu_s": 0.0},
+        }
+    fp, logs = (
+        fingerprint(stage="features", physicalized=dataset_fingerprint(src), config=asdict(cfg)),
+        out.parent / "logs" / "features",
+    )
     recorded = None if overwrite or not out.is_dir() else up_to_date(logs / "report.json", fp)
     if recorded is not None:
         return {**recorded, "up_to_date": True}
@@ -110,7 +159,9 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
     clips = episodes_to_physicalized_clips(src)
     names = [o.name for o in clips[0].robot.objects]
     if not names:
-        raise InputError(src, "objects", "the dataset has no object tracks: distance-field features need at least one object")
+        raise InputError(
+            src, "objects", "the dataset has no object tracks: distance-field features need at least one object"
+        )
     t0 = time.perf_counter()
     cache, per_clip, extra, setup = FieldCache(), [], [], 0.0
     for clip in tqdm(clips, desc="features", unit="clip"):
@@ -121,9 +172,18 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
         f = clip_features(clip, cfg, cache)
         cpu = max(time.process_time() - c0, 1e-9)
         extra.append(f)
-        per_clip.append({"source": clip.robot.source, "task": clip.robot.task, "frames": clip.frames, "cpu_s": cpu, "frames_per_cpu_s": clip.frames / cpu,
-                         "link_queries_per_cpu_s": clip.frames * len(cfg.query_links) / cpu,
-                         "phi_min_m": float(f.df[..., 0].min()), "valid": bool(clip.validation.get("valid", False))})  # fmt: skip
+        per_clip.append(
+            {
+                "source": clip.robot.source,
+                "task": clip.robot.task,
+                "frames": clip.frames,
+                "cpu_s": cpu,
+                "frames_per_cpu_s": clip.frames / cpu,
+                "link_queries_per_cpu_s": clip.frames * len(cfg.query_links) / cpu,
+                "phi_min_m": float(f.df[..., 0].min()),
+                "valid": bool(clip.validation.get("valid", False)),
+            }
+        )
     features, episodes = physicalized_clips_to_episodes(clips)
     features += _features(cfg, names)
     for ep, f in zip(episodes, extra):
@@ -131,22 +191,49 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
         ep.meta.update({"stage": "features", "features": asdict(cfg)})
     frames = sum(c["frames"] for c in per_clip)
     cpu = sum(c["cpu_s"] for c in per_clip)
-    report = {"stage": "features", "config": asdict(cfg), "clips": per_clip, KEY: fp,
-              "summary": {"clips": len(clips), "frames": frames, "cpu_s": cpu, "frames_per_cpu_s": frames / max(cpu, 1e-9), "fields_setup_cpu_s": setup}}  # fmt: skip
+    report = {
+        "stage": "features",
+        "config": asdict(cfg),
+        "clips": per_clip,
+        KEY: fp,
+        "summary": {
+            "clips": len(clips),
+            "frames": frames,
+            "cpu_s": cpu,
+            "frames_per_cpu_s": frames / max(cpu, 1e-9),
+            "fields_setup_cpu_s": setup,
+        },
+    }
     prev = read_card(src)
     synthetic = any(c.robot.provenance.get("synthetic") for c in clips)
     card = DatasetCard(
         title=f"{name}: G1 interaction features (distance fields)",
-        description=("SYNTHETIC demonstrations: " if synthetic else "") + "physically simulated G1 state-action data with LessMimic "
+        description=("SYNTHETIC demonstrations: " if synthetic else "")
+        + "physically simulated G1 state-action data with LessMimic "
         "distance-field interaction features, root commands and proprioception, ready for behaviour cloning.",
-        provenance=[c.robot.source for c in clips] + [str(src)], fps=int(round(clips[0].robot.fps)), synthetic=synthetic, stage="features",
-        actuator_profile=prev.actuator_profile if prev else "", license=prev.license if prev else "other",
-        feature_frames={**(prev.feature_frames if prev else {}), **_FRAMES}, notes=(prev.notes if prev else []) + CARD_NOTES,
-    )  # fmt: skip
-    write_dataset(out, f"lessmimic/{name}-features", int(round(clips[0].robot.fps)), features, episodes, card=card, overwrite=overwrite)
+        provenance=[c.robot.source for c in clips] + [str(src)],
+        fps=int(round(clips[0].robot.fps)),
+        synthetic=synthetic,
+        stage="features",
+        actuator_profile=prev.actuator_profile if prev else "",
+        license=prev.license if prev else "other",
+        feature_frames={**(prev.feature_frames if prev else {}), **_FRAMES},
+        notes=(prev.notes if prev else []) + CARD_NOTES,
+    )
+    write_dataset(
+        out,
+        f"lessmimic/{name}-features",
+        int(round(clips[0].robot.fps)),
+        features,
+        episodes,
+        card=card,
+        overwrite=overwrite,
+    )
     for k, (clip, f) in enumerate(zip(clips, extra)):
         title = f"{clip.robot.source} ({clip.robot.task or 'no task'}): DF over {len(cfg.links)} links"
-        plot_df(f.df, _any_contact(clip), clip.robot.fps, title[:150], logs / f"{k:03d}_{file_stem(clip.robot.source)}.png")
+        plot_df(
+            f.df, _any_contact(clip), clip.robot.fps, title[:150], logs / f"{k:03d}_{file_stem(clip.robot.source)}.png"
+        )
     report["seconds_wall"] = time.perf_counter() - t0
     write_json_atomic(out / "report.json", report)
     write_json_atomic(logs / "report.json", report)  # last: its fingerprint marks a finished run

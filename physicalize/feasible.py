@@ -73,12 +73,16 @@ class FeasibleConfig:
     swing_orientation_cost: float = 3.0
     hand_position_cost: float = 10.0
     hand_orientation_cost: float = 0.5
-    seat_position_cost: float = 300.0  # sitting links on their reference position while the seat supports them (physicalize.seat)
+    seat_position_cost: float = (
+        300.0  # sitting links on their reference position while the seat supports them (physicalize.seat)
+    )
     pelvis_orientation_cost: float = 3.0
     torso_orientation_cost: float = 3.0
     posture_cost: float = 0.3
     damping: float = 1.0  # per rad^2 of step: keeps a nearly straight leg from oscillating
-    task_lm_damping: float = 1.0  # mink's error-scaled damping (mu = lm ||W e||^2): small steps toward unreachable targets
+    task_lm_damping: float = (
+        1.0  # mink's error-scaled damping (mu = lm ||W e||^2): small steps toward unreachable targets
+    )
     iterations: int = 3  # at most this many QP steps per frame ...
     tolerance: float = 2e-4  # ... stopping once every planted foot and the CoM are this close to their targets [m]
     init_iterations: int = 30  # first frame (no speed limit)
@@ -86,12 +90,18 @@ class FeasibleConfig:
     exact_stance: bool = True  # stance feet as equality constraints (else high-cost tasks)
     min_knee: float = 0.1  # rad: the re-solved knees bend at least this much (no straight-leg singularity)
     footstep_tolerance: float = 0.02  # m: a stance frame's reference foot this close to its footstep is planted
-    swing_clearance: float = 0.04  # m: a reference swing whose sole stays lower is lifted to this at mid-swing, level (foot_targets; 0: off). omomo: fell at 3.74 s -> valid; 0.05 also lifts SitStand's turning steps (still valid) and the PyMO walk then fell at 1.44 s instead of 2.50 s
-    self_collision: bool = True  # robot self-collision avoidance (the retargeter's SeparationLimit): a CoM shift must not put a hand into a thigh
+    # m: a reference swing whose sole stays lower is lifted to this at mid-swing, level (foot_targets; 0: off). omomo:
+    # fell at 3.74 s -> valid; 0.05 also lifts SitStand's turning steps (still valid) and the PyMO walk then fell at
+    # 1.44 s instead of 2.50 s
+    swing_clearance: float = 0.04
+    # robot self-collision avoidance (the retargeter's SeparationLimit): a CoM shift must not put a hand into a thigh
+    self_collision: bool = True
     self_min_distance: float = 0.005  # m
     object_collision: bool = True  # robot vs object avoidance, with the objects at their reference poses (when given)
     object_min_distance: float = 0.0  # m: touching is fine, penetrating is not
-    collision_detection_distance: float = 0.02  # m: pairs closer than this enter the QP (0.05: Carry 6.7 s instead of 1.4 s)
+    collision_detection_distance: float = (
+        0.02  # m: pairs closer than this enter the QP (0.05: Carry 6.7 s instead of 1.4 s)
+    )
     collision_gain: float = 0.85
 
 
@@ -180,7 +190,11 @@ def foot_targets(ref: Reference, sole_z: np.ndarray, tolerance: float = 0.02, cl
                 continue
             frames = np.arange(a0, a1)
             # footstep offsets at the last planted frame before and the first planted frame after
-            d0 = (before[2] - ref.foot_pos[a0 - 1, k], (before[3] * ref_rot[a0 - 1].inv()).as_rotvec()) if before else None
+            d0 = (
+                (before[2] - ref.foot_pos[a0 - 1, k], (before[3] * ref_rot[a0 - 1].inv()).as_rotvec())
+                if before
+                else None
+            )
             d1 = (after[2] - ref.foot_pos[a1, k], (after[3] * ref_rot[a1].inv()).as_rotvec()) if after else None
             d0, d1 = d0 or d1, d1 or d0
             alpha = ((frames - (a0 - 1)) / (a1 - a0 + 1))[:, None]  # 0 at the last planted frame, 1 at the next
@@ -203,14 +217,22 @@ class ReferenceIK:
 
     def __init__(self, model: mujoco.MjModel, config: FeasibleConfig = FeasibleConfig()):
         if model.body(1).name != "pelvis":
-            raise ValueError("ReferenceIK: the robot (pelvis) must be the model's first body (mink's ComTask uses body 1)")
+            raise ValueError(
+                "ReferenceIK: the robot (pelvis) must be the model's first body (mink's ComTask uses body 1)"
+            )
         self.model, self.cfg = model, config
         cfg = config
         self.configuration = mink.Configuration(model)
         self.sole_z = np.array([sole_corners(model, b)[0, 2] for b in FOOT_BODIES])
         lm = cfg.task_lm_damping
-        self.feet = [mink.FrameTask(b, "body", cfg.swing_position_cost, cfg.swing_orientation_cost, lm_damping=lm) for b in FOOT_BODIES]
-        self.hands = [mink.FrameTask(b, "body", cfg.hand_position_cost, cfg.hand_orientation_cost, lm_damping=lm) for b in HAND_BODIES]
+        self.feet = [
+            mink.FrameTask(b, "body", cfg.swing_position_cost, cfg.swing_orientation_cost, lm_damping=lm)
+            for b in FOOT_BODIES
+        ]
+        self.hands = [
+            mink.FrameTask(b, "body", cfg.hand_position_cost, cfg.hand_orientation_cost, lm_damping=lm)
+            for b in HAND_BODIES
+        ]
         self.pelvis = mink.FrameTask("pelvis", "body", 0.0, cfg.pelvis_orientation_cost, lm_damping=lm)
         self.torso = mink.FrameTask("torso_link", "body", 0.0, cfg.torso_orientation_cost, lm_damping=lm)
         self.com = mink.ComTask(cost=cfg.com_cost, lm_damping=lm)
@@ -221,21 +243,47 @@ class ReferenceIK:
         self.knee_limit = MinimumJointLimit(model, {"left_knee_joint": cfg.min_knee, "right_knee_joint": cfg.min_knee})
         self.velocity_limit = FrameVelocityLimit(model, joint_velocity_limits(cfg.velocity_limit_factor), dt=1.0 / 50.0)
         groups = self_collision_groups(model)
-        self.collision = [SeparationLimit(model, groups, skip_kept_apart=True, gain=cfg.collision_gain,
-                                          minimum_distance_from_collisions=cfg.self_min_distance,
-                                          collision_detection_distance=cfg.collision_detection_distance)] if cfg.self_collision else []  # fmt: skip
+        self.collision = (
+            [
+                SeparationLimit(
+                    model,
+                    groups,
+                    skip_kept_apart=True,
+                    gain=cfg.collision_gain,
+                    minimum_distance_from_collisions=cfg.self_min_distance,
+                    collision_detection_distance=cfg.collision_detection_distance,
+                )
+            ]
+            if cfg.self_collision
+            else []
+        )
         robot_root = model.body("pelvis").id
-        object_geoms = [g for g in range(model.ngeom) if model.geom_contype[g] and model.geom_bodyid[g] and model.body_rootid[model.geom_bodyid[g]] != robot_root]
-        self.object_limit = [SeparationLimit(model, [(groups[0][0], object_geoms)], gain=cfg.collision_gain,
-                                             minimum_distance_from_collisions=cfg.object_min_distance,
-                                             collision_detection_distance=cfg.collision_detection_distance)] if cfg.object_collision and object_geoms else []  # fmt: skip
+        object_geoms = [
+            g
+            for g in range(model.ngeom)
+            if model.geom_contype[g] and model.geom_bodyid[g] and model.body_rootid[model.geom_bodyid[g]] != robot_root
+        ]
+        self.object_limit = (
+            [
+                SeparationLimit(
+                    model,
+                    [(groups[0][0], object_geoms)],
+                    gain=cfg.collision_gain,
+                    minimum_distance_from_collisions=cfg.object_min_distance,
+                    collision_detection_distance=cfg.collision_detection_distance,
+                )
+            ]
+            if cfg.object_collision and object_geoms
+            else []
+        )
         self._objects_on = False
         self.freeze = [mink.DofFreezingTask(model, list(range(NV_ROBOT, model.nv)))] if model.nv > NV_ROBOT else []
         self._link_ids = [model.body(b).id for b in (*HAND_BODIES, "pelvis", "torso_link")]
         self.stats: dict[str, float] = {}
 
     def _reference_poses(self, qpos: np.ndarray, bodies: list[int] | None = None) -> np.ndarray:
-        """(T, k, 7) wxyz_xyz poses of the ``bodies`` (default: the hands, pelvis and torso) of the reference ``qpos`` (T, 36)."""
+        """(T, k, 7) wxyz_xyz poses of the ``bodies`` (default: the hands, pelvis and torso) of the reference ``qpos``
+        (T, 36)."""
         ids = self._link_ids if bodies is None else bodies
         d = mujoco.MjData(self.model)
         d.qpos[:] = self.model.qpos0
@@ -250,17 +298,39 @@ class ReferenceIK:
     def _step(self, tasks: list, stance_tasks: list) -> None:
         """One QP step, in place (none if no QP solves, counted in ``stats['failed_steps']``)."""
         cfg, c = self.cfg, self.configuration
-        limits = [self.config_limit, self.knee_limit, self.velocity_limit, *self.collision, *(self.object_limit if self._objects_on else [])]
+        limits = [
+            self.config_limit,
+            self.knee_limit,
+            self.velocity_limit,
+            *self.collision,
+            *(self.object_limit if self._objects_on else []),
+        ]
         try:
             if not cfg.exact_stance:
                 raise mink.NoSolutionFound("daqp")
-            dq = mink.solve_ik(c, tasks, 1.0, "daqp", damping=cfg.damping, limits=limits, constraints=[*stance_tasks, *self.freeze] or None)
+            dq = mink.solve_ik(
+                c,
+                tasks,
+                1.0,
+                "daqp",
+                damping=cfg.damping,
+                limits=limits,
+                constraints=[*stance_tasks, *self.freeze] or None,
+            )
         except mink.NoSolutionFound:
             for s in stance_tasks:
                 s.set_position_cost(cfg.stance_position_cost)
                 s.set_orientation_cost(cfg.stance_orientation_cost)
             try:
-                dq = mink.solve_ik(c, [*tasks, *stance_tasks], 1.0, "daqp", damping=cfg.damping, limits=limits, constraints=self.freeze or None)
+                dq = mink.solve_ik(
+                    c,
+                    [*tasks, *stance_tasks],
+                    1.0,
+                    "daqp",
+                    damping=cfg.damping,
+                    limits=limits,
+                    constraints=self.freeze or None,
+                )
             except mink.NoSolutionFound:
                 self._failed += 1
                 return
@@ -271,7 +341,13 @@ class ReferenceIK:
             self._relaxed += cfg.exact_stance
         c.integrate_inplace(dq, 1.0)
 
-    def solve(self, ref: Reference, com_plan: np.ndarray, objects: np.ndarray | None = None, hand_targets: np.ndarray | None = None) -> np.ndarray:
+    def solve(
+        self,
+        ref: Reference,
+        com_plan: np.ndarray,
+        objects: np.ndarray | None = None,
+        hand_targets: np.ndarray | None = None,
+    ) -> np.ndarray:
         """``(T, 36)`` robot ``qpos``: the reference re-solved so its CoM follows ``com_plan`` (T, 3).
         ``objects`` (T, nq - 36): the objects' qpos per frame (their reference track); the robot then
         keeps out of them (``object_collision``), else they stay at ``qpos0`` and are ignored.
@@ -287,7 +363,9 @@ class ReferenceIK:
         if hand_targets is not None:
             links[:, :2, 4:] = hand_targets[:T]
         lo, hi = m.jnt_range[1:, 0], m.jnt_range[1:, 1]
-        hinge = np.array([int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_HINGE) and m.jnt_limited[j] for j in range(1, m.njnt)])
+        hinge = np.array(
+            [int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_HINGE) and m.jnt_limited[j] for j in range(1, m.njnt)]
+        )
         q = m.qpos0.copy()
         q[:NQ_ROBOT] = ref.qpos[0]
         if objects is not None:
@@ -310,7 +388,9 @@ class ReferenceIK:
             for task, pose in zip((*self.hands, self.pelvis, self.torso), links[t]):
                 task.set_target(mink.SE3(wxyz_xyz=pose))
             tasks, stance = [self.com, *self.hands, self.pelvis, self.torso, self.posture], []
-            if seat is not None:  # sitting links stay where the reference sits them (the CoM plan leans the body over them instead)
+            if (
+                seat is not None
+            ):  # sitting links stay where the reference sits them (the CoM plan leans the body over them instead)
                 for i in np.flatnonzero(np.isfinite(ref.seat[t, :, 0])):
                     self.seat[i].set_target(mink.SE3(wxyz_xyz=seat[t, i]))
                     tasks.append(self.seat[i])
@@ -328,13 +408,22 @@ class ReferenceIK:
                         break
             out[t] = c.q[:NQ_ROBOT]
         dt = time.perf_counter() - t0
-        self.stats = {"frames": T, "seconds": dt, "ms_per_frame": 1e3 * dt / max(T, 1), "relaxed_steps": self._relaxed, "failed_steps": self._failed}
+        self.stats = {
+            "frames": T,
+            "seconds": dt,
+            "ms_per_frame": 1e3 * dt / max(T, 1),
+            "relaxed_steps": self._relaxed,
+            "failed_steps": self._failed,
+        }
         return out
 
     def _converged(self, stance_tasks: list) -> bool:
         """The CoM and every planted foot within ``tolerance`` of their targets."""
         c, tol = self.configuration, self.cfg.tolerance
-        return bool(np.linalg.norm(self.com.compute_error(c)) < tol and all(np.linalg.norm(s.compute_error(c)[:3]) < tol for s in stance_tasks))
+        return bool(
+            np.linalg.norm(self.com.compute_error(c)) < tol
+            and all(np.linalg.norm(s.compute_error(c)[:3]) < tol for s in stance_tasks)
+        )
 
     def _step_free(self, tasks: list, stance_tasks: list) -> None:
         """A first-frame step: no speed limit."""
@@ -347,14 +436,25 @@ class ReferenceIK:
             self.velocity_limit.dt = saved
 
 
-def resolve_reference(model: mujoco.MjModel, ref: Reference, com_plan: np.ndarray, config: FeasibleConfig = FeasibleConfig()) -> np.ndarray:
+def resolve_reference(
+    model: mujoco.MjModel, ref: Reference, com_plan: np.ndarray, config: FeasibleConfig = FeasibleConfig()
+) -> np.ndarray:
     """``(T, 36)`` qpos: ``ref`` re-solved by :class:`ReferenceIK` so its CoM follows ``com_plan``."""
     return ReferenceIK(model, config).solve(ref, com_plan)
 
 
-def feasible_reference(model: mujoco.MjModel, ref: Reference, plan_fn: Callable = plan_com, *, passes: int = 1, replan: bool = False,
-                       config: FeasibleConfig = FeasibleConfig(), stats: dict | None = None, objects: np.ndarray | None = None,
-                       hand_targets: np.ndarray | None = None) -> Reference:  # fmt: skip
+def feasible_reference(
+    model: mujoco.MjModel,
+    ref: Reference,
+    plan_fn: Callable = plan_com,
+    *,
+    passes: int = 1,
+    replan: bool = False,
+    config: FeasibleConfig = FeasibleConfig(),
+    stats: dict | None = None,
+    objects: np.ndarray | None = None,
+    hand_targets: np.ndarray | None = None,
+) -> Reference:
     """The reference to track: plan the CoM on ``ref`` (``plan_fn(ref)[0]``), re-solve the whole body
     to it, and build the :class:`Reference` of the re-solved motion with ``ref``'s stance schedule and
     ``com_plan`` set. With ``passes`` > 1, each further pass plans on the previous pass's re-solved

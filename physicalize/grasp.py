@@ -44,7 +44,8 @@ track this module plans, per control frame ``t`` and hand ``k``:
   ``f_k = s (F_k + (N_k - F_k . n_k) n_k)`` (exactly ``F_k`` for a push along the normal). ``|f_k|`` is capped
   at :attr:`GraspConfig.max_hand_force`; ``friction_ok`` records whether the plan is within friction: squeezing,
   ``mu N_k >= |F_t,k|`` under the caps; pressing from one side, the force needed itself in the cone,
-  ``mu F_k . n_k >= |F_t,k|`` (a hand that only presses cannot pull: the InterMimic table, dragged towards the body). ``mu`` and ``condim`` of a
+  ``mu F_k . n_k >= |F_t,k|`` (a hand that only presses cannot pull: the InterMimic table, dragged towards the body).
+  ``mu`` and ``condim`` of a
   hand-object contact follow MuJoCo's mixing rule (:func:`contact_friction`): the geom with the higher
   ``priority`` decides, else the larger friction and condim; ``condim 1`` (frictionless) cannot hold
   anything and raises.
@@ -69,13 +70,15 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from pipeline.foot_contact import keep_runs, runs
-from pipeline.scene import Scene, link_collision_geoms, nearest_geom_pair
 from physicalize.target import Target
 from physicalize.wbc import HAND_BODIES, quat_mat
+from pipeline.foot_contact import keep_runs, runs
+from pipeline.scene import Scene, link_collision_geoms, nearest_geom_pair
 
 GRAVITY = 9.81
-FRICTION_TOL_N = 0.5  # N: a planned force this far outside a friction cone still counts as inside (resting objects: numerical noise)
+FRICTION_TOL_N = (
+    0.5  # N: a planned force this far outside a friction cone still counts as inside (resting objects: numerical noise)
+)
 
 
 @dataclass(frozen=True)
@@ -93,16 +96,25 @@ class GraspConfig:
     max_gap: float = 0.10  # a labelled hand farther than this from the object does not grasp
     w_hold: float = 100.0  # hand task weight while grasping
     w_free: float = 5.0  # hand task weight otherwise (the controller's default)
-    w_hold_rot: float = 20.0  # hand orientation task weight while squeezing an object between the hands (omomo box: 0 -> 20 kept it in the grip, obj err 0.247 -> 0.066 m)
+    # hand orientation task weight while squeezing an object between the hands (omomo box: 0 -> 20 kept it in the grip,
+    # obj err 0.247 -> 0.066 m)
+    w_hold_rot: float = 20.0
     replace_measured: bool = True
     slide_speed: float = 0.05  # m/s: a sliding object's floor friction is ramped in up to this reference speed
     push_travel: float = 0.10  # m: a one-hand contact holds only an object the reference slides this far (a push)
     max_hand_force: float = 120.0  # N: cap on the force one hand applies
     clearance: float = 0.05  # m: an unlabelled hand's surface is kept this far from objects
-    approach_frames: int = 25  # ... except this many frames before and after its labelled contacts (reaching, letting go)
+    approach_frames: int = (
+        25  # ... except this many frames before and after its labelled contacts (reaching, letting go)
+    )
     w_clear: float = 50.0
-    side_lift: float = 0.5  # share of a lifted object's weight the hands carry when they hold it from one side (not squeezed between them)
-    grip_above: float | None = 0.03  # m: a two-hand grip's axis is moved onto the vertical through the object's centre of mass, this high above it (None: where the reference hands are)  # hand task weight while it is kept off an object
+    # share of a lifted object's weight the hands carry when they hold it from one side (not squeezed between them)
+    side_lift: float = 0.5
+    grip_above: float | None = (
+        # m: a two-hand grip's axis is moved onto the vertical through the object's centre of mass, this high above it
+        # (None: where the reference hands are)  # hand task weight while it is kept off an object
+        0.03
+    )
 
 
 @dataclass
@@ -119,17 +131,24 @@ class GraspSchedule:
     grasped: np.ndarray  # (T, 2) bool
     body: np.ndarray  # (T, 2) int: body id of the grasped object, -1 none
     obj: np.ndarray  # (T,) int: index of the grasped object in the object list, -1 none
-    friction_ok: np.ndarray  # (T,) bool: the planned forces are within the hands' friction cones (True when not grasping)
+    friction_ok: (
+        np.ndarray
+    )  # (T,) bool: the planned forces are within the hands' friction cones (True when not grasping)
     rot: np.ndarray  # (T, 2, 3, 3) reference hand orientations
     rot_weight: np.ndarray  # (T, 2) hand orientation task weight (0 when not grasping)
     mu: float
     replace_measured: bool = True
-    attached: np.ndarray | None = None  # (T, 2, 3) the tracked hand point without the squeeze (on the object's track / kept off it)
+    attached: np.ndarray | None = (
+        None  # (T, 2, 3) the tracked hand point without the squeeze (on the object's track / kept off it)
+    )
     hold_ref: np.ndarray | None = None  # (T, 2, 3) reference position of the object each hand holds (0 when none)
-    clear: np.ndarray | None = None  # (T, 2) bool: the hand's target is moved off an object it does not touch in the reference
+    clear: np.ndarray | None = (
+        None  # (T, 2) bool: the hand's target is moved off an object it does not touch in the reference
+    )
 
     def hand_body_targets(self) -> np.ndarray:
-        """(T, 2, 3) hand body origins that put the tracked points on :attr:`attached` at the reference hand orientations."""
+        """(T, 2, 3) hand body origins that put the tracked points on :attr:`attached` at the reference hand
+        orientations."""
         return self.attached - np.einsum("tkij,kj->tki", self.rot, self.offset)
 
     def fill(self, target: Target, t: int) -> Target:
@@ -150,7 +169,9 @@ def contact_friction(model: mujoco.MjModel, g1: int, g2: int) -> tuple[int, floa
     if p1 != p2:
         g = g1 if p1 > p2 else g2
         return int(model.geom_condim[g]), float(model.geom_friction[g, 0])
-    return int(max(model.geom_condim[g1], model.geom_condim[g2])), float(max(model.geom_friction[g1, 0], model.geom_friction[g2, 0]))
+    return int(max(model.geom_condim[g1], model.geom_condim[g2])), float(
+        max(model.geom_friction[g1, 0], model.geom_friction[g2, 0])
+    )
 
 
 def hand_geoms(model: mujoco.MjModel) -> list[list[int]]:
@@ -212,8 +233,14 @@ def _label_runs(key: np.ndarray) -> list[tuple[int, int, int]]:
     return out
 
 
-def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: np.ndarray | None, objects: dict[str, np.ndarray],
-                   cfg: GraspConfig = GraspConfig()) -> GraspSchedule | None:  # fmt: skip
+def grasp_schedule(
+    scene: Scene,
+    ref,
+    contact_links: tuple[str, ...],
+    contacts: np.ndarray | None,
+    objects: dict[str, np.ndarray],
+    cfg: GraspConfig = GraspConfig(),
+) -> GraspSchedule | None:
     """The schedule for reference ``ref`` (:class:`physicalize.reference.Reference`, ``T`` frames) from
     the clip's contact labels ``contacts`` (T, len(contact_links)) and the reference object tracks
     ``objects`` (name -> (T, 7) pose); ``None`` when no frame holds an object and no hand needs
@@ -224,17 +251,32 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
     if contacts is None or not all(h in links for h in HAND_BODIES):
         labels = np.zeros((ref.frames, 2), bool)
     else:
-        labels = np.stack([keep_runs(keep_runs(np.asarray(contacts[: ref.frames, links.index(h)], bool), cfg.min_run, True), cfg.min_run, False)
-                           for h in HAND_BODIES], axis=1)  # fmt: skip
+        labels = np.stack(
+            [
+                keep_runs(
+                    keep_runs(np.asarray(contacts[: ref.frames, links.index(h)], bool), cfg.min_run, True),
+                    cfg.min_run,
+                    False,
+                )
+                for h in HAND_BODIES
+            ],
+            axis=1,
+        )
     m, T, fps = scene.model, ref.frames, ref.fps
     names = list(scene.object_qpos_adr)
-    obj_geoms = [[g for g in range(m.ngeom) if m.geom_contype[g] and m.geom_bodyid[g] == scene.object_body_id[n]] for n in names]
+    obj_geoms = [
+        [g for g in range(m.ngeom) if m.geom_contype[g] and m.geom_bodyid[g] == scene.object_body_id[n]] for n in names
+    ]
     hgeoms = hand_geoms(m)
     hand_ids = [m.body(b).id for b in HAND_BODIES]
     offset = hand_offsets(m)
     d = mujoco.MjData(m)
     centre, rot = np.zeros((T, 2, 3)), np.zeros((T, 2, 3, 3))
-    near_d, near_n, near_o = np.full((T, 2), np.inf), np.zeros((T, 2, 3)), np.full((T, 2), -1)  # nearest object per hand
+    near_d, near_n, near_o = (
+        np.full((T, 2), np.inf),
+        np.zeros((T, 2, 3)),
+        np.full((T, 2), -1),
+    )  # nearest object per hand
     reach = max(cfg.max_gap, cfg.clearance)
     fromto = np.zeros(6)
     for t in range(T):
@@ -252,7 +294,12 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
                     v = (fromto[3:] - fromto[:3]) * (1.0 if dist >= 0 else -1.0)
                     nv = np.linalg.norm(v)
                     near_d[t, k], near_o[t, k] = dist, i
-                    near_n[t, k] = v / nv if nv > 1e-6 else (d.xipos[scene.object_body_id[names[i]]] - centre[t, k]) / max(np.linalg.norm(d.xipos[scene.object_body_id[names[i]]] - centre[t, k]), 1e-9)
+                    near_n[t, k] = (
+                        v / nv
+                        if nv > 1e-6
+                        else (d.xipos[scene.object_body_id[names[i]]] - centre[t, k])
+                        / max(np.linalg.norm(d.xipos[scene.object_body_id[names[i]]] - centre[t, k]), 1e-9)
+                    )
     # which hand holds which object, per frame
     held = labels & (near_d < cfg.max_gap)
     both = held.all(axis=1) & (near_o[:, 0] == near_o[:, 1])
@@ -269,20 +316,24 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
     held = key >= 0
     opposed &= held.all(axis=1)
     s = np.stack([_ramp(held[:, k], cfg.ramp_frames) for k in range(2)], axis=1)
-    # targets fixed to the object: the hand point and normal where the run starts, moved with the object's reference pose
+    # targets fixed to the object: the hand point and normal where the run starts, moved with the object's reference
+    # pose
     point, normal, gap = centre.copy(), np.zeros((T, 2, 3)), np.zeros((T, 2))
     for k in range(2):
         for a, b, i in _label_runs(key[:, k]):
             pose = objects[names[i]]
             win = np.arange(a, min(b, a + cfg.ramp_frames))
             both_in = win[opposed[win]]
-            if both_in.size:  # a two-hand grip: one anchor frame for both hands, the grip axis moved over the centre of mass
+            if (
+                both_in.size
+            ):  # a two-hand grip: one anchor frame for both hands, the grip axis moved over the centre of mass
                 t0 = int(both_in[np.argmin(np.abs(near_d[both_in]).sum(axis=1))])
             else:
                 t0 = int(win[np.argmin(np.abs(near_d[win, k]))])
             R0 = quat_mat(pose[t0, 3:7])
             c0 = centre[t0, k].copy()
-            if both_in.size:  # both hand points on one line along the grip normal (else the squeezes make a couple that spins the object)
+            # both hand points on one line along the grip normal (else the squeezes make a couple that spins the object)
+            if both_in.size:
                 n = near_n[t0, 0] - near_n[t0, 1]
                 n /= max(np.linalg.norm(n), 1e-9)
                 axis = centre[t0].mean(axis=0)
@@ -324,7 +375,10 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
                 for og in obj_geoms[i]:
                     condim, f = contact_friction(m, hg, og)
                     if condim < 3 or f <= 0:
-                        raise ValueError(f"hand geom {m.geom(hg).name!r} on {name!r}: condim {condim}, friction {f}: a frictionless contact cannot hold")
+                        raise ValueError(
+                            f"hand geom {m.geom(hg).name!r} on {name!r}: condim {condim}, friction {f}: a frictionless "
+                            "contact cannot hold"
+                        )
                     mu = min(mu, f)
     hold_ref = np.zeros((T, 2, 3))
     for k in range(2):
@@ -348,7 +402,11 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
             if speed > 1e-6:  # sliding on its support: kinetic friction against the motion
                 drag[:2] = floor_mu * mass * GRAVITY * min(1.0, speed / cfg.slide_speed) * v_o[t, :2] / speed
             rest = 1 - lam[t] if opposed[t] else 1 - cfg.side_lift * lam[t]  # share of its weight still on its support
-            F = mass * np.r_[a_o[t, :2], lam[t] * a_o[t, 2]] + lam[t] * mass * GRAVITY * np.array([0, 0, 1.0]) + rest * drag
+            F = (
+                mass * np.r_[a_o[t, :2], lam[t] * a_o[t, 2]]
+                + lam[t] * mass * GRAVITY * np.array([0, 0, 1.0])
+                + rest * drag
+            )
             if not opposed[t]:  # lifted from one side only: the far side still rests on its support
                 F[2] -= (1 - cfg.side_lift) * lam[t] * mass * (GRAVITY + a_o[t, 2])
             share = F / len(hands)
@@ -366,12 +424,31 @@ def grasp_schedule(scene: Scene, ref, contact_links: tuple[str, ...], contacts: 
                 friction_ok[t] &= ok
     if not held.any() and not clear.any():
         return None
-    return GraspSchedule(offset, point, vel, acc, weight, force, normal, held, body, np.where(held[:, 0], key[:, 0], key[:, 1]), friction_ok,
-                         rot, s * cfg.w_hold_rot * opposed[:, None], float(mu) if np.isfinite(mu) else 0.0, cfg.replace_measured, attached, hold_ref, clear)  # fmt: skip
+    return GraspSchedule(
+        offset,
+        point,
+        vel,
+        acc,
+        weight,
+        force,
+        normal,
+        held,
+        body,
+        np.where(held[:, 0], key[:, 0], key[:, 1]),
+        friction_ok,
+        rot,
+        s * cfg.w_hold_rot * opposed[:, None],
+        float(mu) if np.isfinite(mu) else 0.0,
+        cfg.replace_measured,
+        attached,
+        hold_ref,
+        clear,
+    )
 
 
 def _pushed(pose: np.ndarray, cfg: GraspConfig) -> bool:
-    """The object slides along its support during these frames: it moves > ``push_travel`` horizontally and is not lifted."""
+    """The object slides along its support during these frames: it moves > ``push_travel`` horizontally and is not
+    lifted."""
     travel = float(np.linalg.norm(pose[:, :2] - pose[0, :2], axis=1).max())
     return travel > cfg.push_travel and float(pose[:, 2].max() - pose[0, 2]) < cfg.lift_blend
 

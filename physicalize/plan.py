@@ -15,7 +15,8 @@ foot's edge left none: the robot fell behind its plan in every single support). 
     x_{k+1} = A x_k + B u_k,   x = (c, c_dot, c_ddot) per horizontal axis,  u = jerk,
     p_k = C x_k = c - (z_c / g) c_ddot
 
-(plus the hands' shift) is driven by the optimal preview law ``u_k = -G_i sum_j (p_j - p*_j) - G_x x_k - sum_{j=1..N} G_d[j] p*_{k+j}``
+(plus the hands' shift) is driven by the optimal preview law ``u_k = -G_i sum_j (p_j - p*_j) - G_x x_k - sum_{j=1..N}
+G_d[j] p*_{k+j}``
 (gains from the discrete Riccati equation of the error-augmented system, ``N`` = 1.6 s of preview),
 so the planned CoM's ZMP follows the reference inside the support region. The height ``z_c`` is the
 mean kinematic CoM height; the CoM's vertical motion is kept from the reference.
@@ -35,14 +36,20 @@ from pipeline.foot_contact import runs
 
 GRAVITY = 9.81
 MARGIN = 0.03
-DOUBLE_SUPPORT_SCALE = 0.5  # run3 frames before a fall, 7 clips x 3 windows: 1.0 -> 4877 (with the hands' shift and the leg clearance rows: 0.7 -> 5459, 0.5 -> 6093)
+# run3 frames before a fall, 7 clips x 3 windows: 1.0 -> 4877 (with the hands' shift and the leg clearance rows: 0.7 ->
+# 5459, 0.5 -> 6093)
+DOUBLE_SUPPORT_SCALE = 0.5
 SINGLE_SUPPORT_SCALE = 0.3  # single-support ZMP within this fraction of the foot about its centre
 PREVIEW_S = 1.6
-SEAT_LEAD_S = 0.2  # the plan leaves the seat this long before the reference's seat support ends (SitStand seeds 0-9: 6 -> 9 valid; 0.4 s: the thighs pressed 2-3 cm into the seat)
+# the plan leaves the seat this long before the reference's seat support ends (SitStand seeds 0-9: 6 -> 9 valid; 0.4 s:
+# the thighs pressed 2-3 cm into the seat)
+SEAT_LEAD_S = 0.2
 
 
 @lru_cache(maxsize=16)
-def preview_gains(dt: float, zc: float, n: int, qe: float = 1.0, r: float = 1e-6) -> tuple[float, np.ndarray, np.ndarray]:
+def preview_gains(
+    dt: float, zc: float, n: int, qe: float = 1.0, r: float = 1e-6
+) -> tuple[float, np.ndarray, np.ndarray]:
     """``(G_i, G_x (3,), G_d (n,))`` of the preview controller for sample time ``dt`` and height ``zc``."""
     A = np.array([[1.0, dt, dt * dt / 2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
     B = np.array([[dt**3 / 6], [dt * dt / 2], [dt]])
@@ -79,7 +86,11 @@ def support_polygon(ref: Reference, t: int, seat: bool = True) -> np.ndarray:
 def clip_to_polygon(p: np.ndarray, poly: np.ndarray, margin: float = MARGIN) -> np.ndarray:
     """The point of the polygon shrunk by ``margin`` nearest to ``p`` (``p`` itself when inside)."""
     centre = poly.mean(axis=0)
-    shrunk = centre + (poly - centre) * np.clip(1.0 - margin / np.maximum(np.linalg.norm(poly - centre, axis=1), 1e-9), 0.0, 1.0)[:, None]
+    shrunk = (
+        centre
+        + (poly - centre)
+        * np.clip(1.0 - margin / np.maximum(np.linalg.norm(poly - centre, axis=1), 1e-9), 0.0, 1.0)[:, None]
+    )
     edges = np.roll(shrunk, -1, axis=0) - shrunk
     cross = edges[:, 0] * (p[1] - shrunk[:, 1]) - edges[:, 1] * (p[0] - shrunk[:, 0])
     if np.all(cross >= 0):
@@ -114,11 +125,15 @@ def hand_cop_shift(com: np.ndarray, loads: HandLoads) -> np.ndarray:
     F = -loads.force
     h = loads.point
     load = loads.mass * GRAVITY - F[..., 2].sum(axis=1)
-    e = np.stack([(h[..., 2] * F[..., i] - (h[..., i] - com[:, None, i]) * F[..., 2]).sum(axis=1) for i in range(2)], -1)
+    e = np.stack(
+        [(h[..., 2] * F[..., i] - (h[..., i] - com[:, None, i]) * F[..., 2]).sum(axis=1) for i in range(2)], -1
+    )
     return e / load[:, None]
 
 
-def zmp_reference(ref: Reference, single_support_scale: float = SINGLE_SUPPORT_SCALE, shift: np.ndarray | None = None) -> np.ndarray:
+def zmp_reference(
+    ref: Reference, single_support_scale: float = SINGLE_SUPPORT_SCALE, shift: np.ndarray | None = None
+) -> np.ndarray:
     """(T, 2) ZMP reference: the reference's centre of pressure, the kinematic CoM projection moved by
     the hands' ``shift`` (:func:`hand_cop_shift`), clipped into each frame's support polygon (scaled by
     :data:`DOUBLE_SUPPORT_SCALE`, in single support by ``single_support_scale``, about its centre). The

@@ -19,8 +19,14 @@ import numpy as np  # noqa: E402
 from pipeline.figure import save_figure  # noqa: E402
 
 
-def plot_physicalized(com: dict, foot_force: np.ndarray, objects: dict[str, tuple[np.ndarray, np.ndarray]], fps: float,
-                      title: str, path: Path) -> Path:  # fmt: skip
+def plot_physicalized(
+    com: dict,
+    foot_force: np.ndarray,
+    objects: dict[str, tuple[np.ndarray, np.ndarray]],
+    fps: float,
+    title: str,
+    path: Path,
+) -> Path:
     """Write the PNG atomically; ``objects`` maps a name to (reference z, simulated z)."""
     T = len(com["simulated"])
     t = np.arange(T) / fps
@@ -30,8 +36,15 @@ def plot_physicalized(com: dict, foot_force: np.ndarray, objects: dict[str, tupl
         axes[0].plot(t, com["planned"][:, k], color="tab:blue", ls=ls, label=f"planned CoM {axis}")
         axes[0].plot(t, com["simulated"][:, k], color="tab:orange", ls=ls, label=f"simulated CoM {axis}")
         if com.get("support") is not None:
-            axes[0].fill_between(t, com["support"][:, 0, k], com["support"][:, 1, k], color="tab:green", alpha=0.12, lw=0,
-                                 label=f"support region {axis}")  # fmt: skip
+            axes[0].fill_between(
+                t,
+                com["support"][:, 0, k],
+                com["support"][:, 1, k],
+                color="tab:green",
+                alpha=0.12,
+                lw=0,
+                label=f"support region {axis}",
+            )
         if com.get("zmp_planned") is not None:
             axes[0].plot(t, com["zmp_planned"][:, k], color="tab:green", ls=ls, lw=0.8, label=f"planned ZMP {axis}")
     axes[1].plot(t, com["pelvis_ref"], color="tab:gray", label="reference pelvis z")

@@ -18,10 +18,10 @@ import mujoco
 import numpy as np
 from scipy.signal import savgol_filter
 
-from pipeline.clip_dataset import qvel_from_qpos
-from pipeline.foot_contact import keep_runs
 from physicalize.target import Target
 from physicalize.wbc import FOOT_BODIES, HAND_BODIES, sole_corners
+from pipeline.clip_dataset import qvel_from_qpos
+from pipeline.foot_contact import keep_runs
 
 STANCE_HEIGHT = 0.03
 STANCE_SPEED = 0.1
@@ -82,11 +82,22 @@ class Reference:
         t = min(max(t, 0), self.frames - 1)
         com, cv, ca, fv, fa = self._derivatives()
         target = Target(
-            qpos=self.qpos[t], qvel=self.qvel[t], qacc=self.qacc[t], com=com[t], com_vel=cv[t], com_acc=ca[t],
-            stance=(bool(self.stance[t, 0]), bool(self.stance[t, 1])), foot_pos=self.foot_pos[t],
-            foot_quat=self.foot_quat[t], foot_vel=fv[t], foot_acc=fa[t], sole_height=self.sole_height[t], hand_pos=self.hand_pos[t], torso_quat=self.torso_quat[t],
+            qpos=self.qpos[t],
+            qvel=self.qvel[t],
+            qacc=self.qacc[t],
+            com=com[t],
+            com_vel=cv[t],
+            com_acc=ca[t],
+            stance=(bool(self.stance[t, 0]), bool(self.stance[t, 1])),
+            foot_pos=self.foot_pos[t],
+            foot_quat=self.foot_quat[t],
+            foot_vel=fv[t],
+            foot_acc=fa[t],
+            sole_height=self.sole_height[t],
+            hand_pos=self.hand_pos[t],
+            torso_quat=self.torso_quat[t],
             seated=self.seat is not None and bool(np.isfinite(self.seat[t, :, 0]).any()),
-        )  # fmt: skip
+        )
         return target if self.grasp is None else self.grasp.fill(target, t)
 
 

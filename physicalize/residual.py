@@ -132,18 +132,31 @@ def start_state(scene, ref: Reference, objects: dict[str, np.ndarray], s: int) -
 
 
 def _kernel(err: float, sigma: float) -> float:
-    return float(np.exp(-(err / sigma) ** 2))
+    return float(np.exp(-((err / sigma) ** 2)))
 
 
 def _actor_cfg(cfg: ResidualConfig) -> dict:
-    return {"class_name": "MLPModel", "hidden_dims": list(cfg.hidden_dims), "activation": "elu", "obs_normalization": True,
-            "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": cfg.init_std, "std_type": "scalar"}}  # fmt: skip
+    return {
+        "class_name": "MLPModel",
+        "hidden_dims": list(cfg.hidden_dims),
+        "activation": "elu",
+        "obs_normalization": True,
+        "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": cfg.init_std, "std_type": "scalar"},
+    }
 
 
 class ResidualEnv(VecEnv):
     """``num_envs`` copies of one clip's tracking problem (CPU, one ``MjData`` and controller each)."""
 
-    def __init__(self, scene, ref: Reference, objects: dict[str, np.ndarray], num_envs: int, seed: int, cfg: ResidualConfig = ResidualConfig()):
+    def __init__(
+        self,
+        scene,
+        ref: Reference,
+        objects: dict[str, np.ndarray],
+        num_envs: int,
+        seed: int,
+        cfg: ResidualConfig = ResidualConfig(),
+    ):
         if ref.frames < 3:
             raise ValueError(f"a residual needs a clip of at least 3 frames, got {ref.frames}")
         self.scene, self.ref, self.objects, self.cfg = scene, ref, objects, cfg
@@ -183,14 +196,22 @@ class ResidualEnv(VecEnv):
     def _reward(self, d: mujoco.MjData, t: int, a: np.ndarray, a_prev: np.ndarray) -> float:
         cfg, r = self.cfg, self.ref.qpos[t]
         e_rot = 2.0 * np.arccos(min(1.0, abs(float(np.dot(d.qpos[3:7], r[3:7])))))
-        e_feet = np.sqrt(sum(float(np.sum((d.xpos[f] - self.ref.foot_pos[t, k]) ** 2)) for k, f in enumerate(self.feet)))
-        rew = (cfg.w_joint * _kernel(np.linalg.norm(d.qpos[7:36] - r[7:]), cfg.sigma_joint)
-               + cfg.w_root_pos * _kernel(np.linalg.norm(d.qpos[:3] - r[:3]), cfg.sigma_root_pos)
-               + cfg.w_root_rot * _kernel(e_rot, cfg.sigma_root_rot) + cfg.w_feet * _kernel(e_feet, cfg.sigma_feet)
-               + cfg.w_alive - cfg.w_action_rate * float(np.sum((a - a_prev) ** 2)))  # fmt: skip
+        e_feet = np.sqrt(
+            sum(float(np.sum((d.xpos[f] - self.ref.foot_pos[t, k]) ** 2)) for k, f in enumerate(self.feet))
+        )
+        rew = (
+            cfg.w_joint * _kernel(np.linalg.norm(d.qpos[7:36] - r[7:]), cfg.sigma_joint)
+            + cfg.w_root_pos * _kernel(np.linalg.norm(d.qpos[:3] - r[:3]), cfg.sigma_root_pos)
+            + cfg.w_root_rot * _kernel(e_rot, cfg.sigma_root_rot)
+            + cfg.w_feet * _kernel(e_feet, cfg.sigma_feet)
+            + cfg.w_alive
+            - cfg.w_action_rate * float(np.sum((a - a_prev) ** 2))
+        )
         if self.obj is not None:
             name, adr = self.obj
-            rew += cfg.w_object * _kernel(np.linalg.norm(d.qpos[adr : adr + 3] - self.objects[name][t, :3]), cfg.sigma_object)
+            rew += cfg.w_object * _kernel(
+                np.linalg.norm(d.qpos[adr : adr + 3] - self.objects[name][t, :3]), cfg.sigma_object
+            )
         else:
             rew += cfg.w_object
         return rew
@@ -230,18 +251,45 @@ class ResidualEnv(VecEnv):
 def _train_cfg(cfg: ResidualConfig) -> dict:
     """rsl-rl-lib 5.4.2 OnPolicyRunner configuration (PPO, MLP actor/critic with observation normalisation)."""
     return {
-        "num_steps_per_env": cfg.num_steps_per_env, "save_interval": 10**9, "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
-        "algorithm": {"class_name": "PPO", "learning_rate": cfg.learning_rate, "num_learning_epochs": cfg.num_learning_epochs,
-                      "num_mini_batches": cfg.num_mini_batches, "gamma": cfg.gamma, "lam": cfg.lam, "entropy_coef": cfg.entropy_coef,
-                      "clip_param": 0.2, "value_loss_coef": 1.0, "max_grad_norm": 1.0, "schedule": "adaptive", "desired_kl": 0.01,
-                      "rnd_cfg": None, "symmetry_cfg": None},
+        "num_steps_per_env": cfg.num_steps_per_env,
+        "save_interval": 10**9,
+        "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
+        "algorithm": {
+            "class_name": "PPO",
+            "learning_rate": cfg.learning_rate,
+            "num_learning_epochs": cfg.num_learning_epochs,
+            "num_mini_batches": cfg.num_mini_batches,
+            "gamma": cfg.gamma,
+            "lam": cfg.lam,
+            "entropy_coef": cfg.entropy_coef,
+            "clip_param": 0.2,
+            "value_loss_coef": 1.0,
+            "max_grad_norm": 1.0,
+            "schedule": "adaptive",
+            "desired_kl": 0.01,
+            "rnd_cfg": None,
+            "symmetry_cfg": None,
+        },
         "actor": _actor_cfg(cfg),
-        "critic": {"class_name": "MLPModel", "hidden_dims": list(cfg.hidden_dims), "activation": "elu", "obs_normalization": True},
-    }  # fmt: skip
+        "critic": {
+            "class_name": "MLPModel",
+            "hidden_dims": list(cfg.hidden_dims),
+            "activation": "elu",
+            "obs_normalization": True,
+        },
+    }
 
 
-def train_residual(clip: RobotClip, iterations: int, num_envs: int, seed: int, out_path: str | Path, *,
-                   config: ResidualConfig = ResidualConfig(), verbose: bool = False) -> Path:  # fmt: skip
+def train_residual(
+    clip: RobotClip,
+    iterations: int,
+    num_envs: int,
+    seed: int,
+    out_path: str | Path,
+    *,
+    config: ResidualConfig = ResidualConfig(),
+    verbose: bool = False,
+) -> Path:
     """Train the residual on one retargeted ``clip`` with PPO (``iterations`` x ``num_envs`` x
     ``config.num_steps_per_env`` env steps; torch on 1 thread, seeded) and write the checkpoint to
     ``out_path`` (atomically). Deterministic for a seed on one machine."""
@@ -262,18 +310,37 @@ def train_residual(clip: RobotClip, iterations: int, num_envs: int, seed: int, o
             n_ep, steps, rsum = len(env.episodes), env.steps, env.reward_sum
             runner.learn(1)
             ended = env.episodes[n_ep:]
-            row = {"iteration": it, "reward_per_step": (env.reward_sum - rsum) / max(env.steps - steps, 1), "episodes": len(ended),
-                   "mean_episode_frames": float(np.mean([e[1] for e in ended])) if ended else None,
-                   "fall_frac": float(np.mean([e[2] for e in ended])) if ended else None}  # fmt: skip
+            row = {
+                "iteration": it,
+                "reward_per_step": (env.reward_sum - rsum) / max(env.steps - steps, 1),
+                "episodes": len(ended),
+                "mean_episode_frames": float(np.mean([e[1] for e in ended])) if ended else None,
+                "fall_frac": float(np.mean([e[2] for e in ended])) if ended else None,
+            }
             history.append(row)
             if verbose:
-                print(" ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()), flush=True)
+                print(
+                    " ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()), flush=True
+                )
         seconds = time.perf_counter() - t0
         actor = runner.alg.get_policy()
-        ckpt = {"format": FORMAT, "config": {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(config).items()},
-                "obs_dim": env.obs_dim, "actor_state_dict": actor.state_dict(), "critic_state_dict": runner.alg.critic.state_dict(),
-                "training": {"source": clip.source, "frames": ref.frames, "iterations": iterations, "num_envs": num_envs, "seed": seed,
-                             "env_steps": env.steps, "seconds": seconds, "history": history}}  # fmt: skip
+        ckpt = {
+            "format": FORMAT,
+            "config": {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(config).items()},
+            "obs_dim": env.obs_dim,
+            "actor_state_dict": actor.state_dict(),
+            "critic_state_dict": runner.alg.critic.state_dict(),
+            "training": {
+                "source": clip.source,
+                "frames": ref.frames,
+                "iterations": iterations,
+                "num_envs": num_envs,
+                "seed": seed,
+                "env_steps": env.steps,
+                "seconds": seconds,
+                "history": history,
+            },
+        }
     finally:
         torch.set_num_threads(threads)
     out = Path(out_path)

@@ -87,9 +87,18 @@ def _link_contacts(m, d, link_geoms: list[set[int]], object_geoms: set[int]) -> 
     return out
 
 
-def simulate(scene: Scene, ref: Reference, controller: WholeBodyController, qpos0: np.ndarray, qvel0: np.ndarray, *,
-             contact_links: tuple[str, ...] = (), perturb: Callable[[int, mujoco.MjData], None] | None = None,
-             stop_on_fall: bool = True, residual: Callable[[mujoco.MjData, Reference, int, np.ndarray], np.ndarray] | None = None) -> Rollout:  # fmt: skip
+def simulate(
+    scene: Scene,
+    ref: Reference,
+    controller: WholeBodyController,
+    qpos0: np.ndarray,
+    qvel0: np.ndarray,
+    *,
+    contact_links: tuple[str, ...] = (),
+    perturb: Callable[[int, mujoco.MjData], None] | None = None,
+    stop_on_fall: bool = True,
+    residual: Callable[[mujoco.MjData, Reference, int, np.ndarray], np.ndarray] | None = None,
+) -> Rollout:
     """Track ``ref`` from ``(qpos0, qvel0)``; ``perturb(t, data)`` may set ``xfrc_applied`` (tests only).
     With a ``residual(data, ref, t, base_action)`` (:class:`physicalize.residual.ResidualPolicy`) the
     applied (and recorded) targets are its output, else the controller's."""
@@ -101,7 +110,9 @@ def simulate(scene: Scene, ref: Reference, controller: WholeBodyController, qpos
     link_geoms = [set(link_collision_geoms(m, b)) for b in contact_links]
     object_geoms = {g for g in range(m.ngeom) if m.geom_bodyid[g] in set(scene.object_body_id.values())}
     T = ref.frames
-    rec = {k: [] for k in ("qpos", "qvel", "action", "torque", "foot_force", "contact", "penetration", "external_force")}
+    rec = {
+        k: [] for k in ("qpos", "qvel", "action", "torque", "foot_force", "contact", "penetration", "external_force")
+    }
     fails, fell_at = 0, None
     t0 = time.perf_counter()
     for t in range(T):
@@ -132,11 +143,19 @@ def simulate(scene: Scene, ref: Reference, controller: WholeBodyController, qpos
             if stop_on_fall:
                 break
     arrays = {k: np.asarray(v) for k, v in rec.items()}
-    return Rollout(**arrays, qp_failures=fails, fell_at=fell_at, seconds=time.perf_counter() - t0,
-                   final_qpos=d.qpos.copy(), final_qvel=d.qvel.copy())  # fmt: skip
+    return Rollout(
+        **arrays,
+        qp_failures=fails,
+        fell_at=fell_at,
+        seconds=time.perf_counter() - t0,
+        final_qpos=d.qpos.copy(),
+        final_qvel=d.qvel.copy(),
+    )
 
 
-def replay(model: mujoco.MjModel, qpos0: np.ndarray, qvel0: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def replay(
+    model: mujoco.MjModel, qpos0: np.ndarray, qvel0: np.ndarray, actions: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Open-loop replay in a fresh ``MjData``: ``(qpos (T+1, nq), qvel (T+1, nv))`` after each held action."""
     d = mujoco.MjData(model)
     d.qpos[:], d.qvel[:] = qpos0, qvel0

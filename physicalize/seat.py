@@ -38,7 +38,15 @@ if TYPE_CHECKING:
 
 NV_ROBOT = 6 + NUM_JOINTS
 SUPPORT_NORMAL_Z = np.cos(np.pi / 4)  # a contact whose normal is this close to vertical supports from below
-SEAT_LINKS = ("pelvis", "left_hip_pitch_link", "left_hip_roll_link", "left_hip_yaw_link", "right_hip_pitch_link", "right_hip_roll_link", "right_hip_yaw_link")
+SEAT_LINKS = (
+    "pelvis",
+    "left_hip_pitch_link",
+    "left_hip_roll_link",
+    "left_hip_yaw_link",
+    "right_hip_pitch_link",
+    "right_hip_roll_link",
+    "right_hip_yaw_link",
+)
 MAX_SEAT_POINTS = len(SEAT_LINKS)
 
 
@@ -47,7 +55,9 @@ class SeatConfig:
     """Seat support parameters."""
 
     min_run: int = 3  # frames: shorter pelvis-label runs (and gaps) are dropped
-    dilate: int = 40  # frames the labelled runs are widened by at each end (10: SitStand fell at 7.2 s, its hips reach the seat 0.7 s before the label)
+    # frames the labelled runs are widened by at each end (10: SitStand fell at 7.2 s, its hips reach the seat 0.7 s
+    # before the label)
+    dilate: int = 40
     reach: float = 0.02  # m: a sitting link this close to an object's upward-facing surface sits on it
 
 
@@ -62,8 +72,14 @@ class SupportPoint:
     tau: np.ndarray
 
 
-def seat_support(model: mujoco.MjModel, ref: Reference, contact_links: tuple[str, ...], contacts: np.ndarray | None,
-                 objects_qpos: np.ndarray | None, cfg: SeatConfig = SeatConfig()) -> np.ndarray | None:  # fmt: skip
+def seat_support(
+    model: mujoco.MjModel,
+    ref: Reference,
+    contact_links: tuple[str, ...],
+    contacts: np.ndarray | None,
+    objects_qpos: np.ndarray | None,
+    cfg: SeatConfig = SeatConfig(),
+) -> np.ndarray | None:
     """(T, :data:`MAX_SEAT_POINTS`, 3) seat support points of the kinematic reference ``ref`` (NaN rows where
     a link does not sit), see the module docstring; ``None`` when the clip never sits. ``objects_qpos``
     (T, nq - 36) places the scene's free objects per frame (None: as in the model)."""
@@ -76,9 +92,16 @@ def seat_support(model: mujoco.MjModel, ref: Reference, contact_links: tuple[str
         seated[max(0, a - cfg.dilate) : b + cfg.dilate] = True
     if not seated.any():
         return None
-    links = [[g for g in range(model.ngeom) if model.geom_bodyid[g] == model.body(name).id and model.geom_contype[g]] for name in SEAT_LINKS]
+    links = [
+        [g for g in range(model.ngeom) if model.geom_bodyid[g] == model.body(name).id and model.geom_contype[g]]
+        for name in SEAT_LINKS
+    ]
     robot = model.body("pelvis").id
-    objects = [g for g in range(model.ngeom) if model.geom_contype[g] and model.geom_bodyid[g] and model.body_rootid[model.geom_bodyid[g]] != robot]
+    objects = [
+        g
+        for g in range(model.ngeom)
+        if model.geom_contype[g] and model.geom_bodyid[g] and model.body_rootid[model.geom_bodyid[g]] != robot
+    ]
     d = mujoco.MjData(model)
     out = np.full((T, MAX_SEAT_POINTS, 3), np.nan)
     fromto = np.zeros(6)
@@ -90,7 +113,9 @@ def seat_support(model: mujoco.MjModel, ref: Reference, contact_links: tuple[str
         for i, geoms in enumerate(links):
             dist, _, _ = nearest_geom_pair(model, d, geoms, objects, cfg.reach, fromto)
             v = (fromto[:3] - fromto[3:]) * (1.0 if dist >= 0 else -1.0)  # from the object's surface to the link
-            if dist < cfg.reach and (np.linalg.norm(v) < 1e-4 or v[2] >= SUPPORT_NORMAL_Z * np.linalg.norm(v)):  # on an upward-facing surface
+            if dist < cfg.reach and (
+                np.linalg.norm(v) < 1e-4 or v[2] >= SUPPORT_NORMAL_Z * np.linalg.norm(v)
+            ):  # on an upward-facing surface
                 out[t, i] = fromto[:3]
     return out if np.isfinite(out).any() else None
 

@@ -38,7 +38,9 @@ if TYPE_CHECKING:
 
 TEACHERS = ("base", "base+residual:<checkpoint>")
 REPLAY_TOL_M = 1e-6
-NO_RETRY_GRIP_OUT = 0.5  # share of held frames whose planned hand forces leave the friction cones (the InterMimic table: 0.85)
+NO_RETRY_GRIP_OUT = (
+    0.5  # share of held frames whose planned hand forces leave the friction cones (the InterMimic table: 0.85)
+)
 
 
 @dataclass(frozen=True)
@@ -61,7 +63,9 @@ def parse_teacher(teacher: str) -> TeacherSpec:
         raise InputError(teacher, "--teacher", f"unknown teacher; available: {', '.join(TEACHERS)}")
     path = Path(teacher[len(prefix) :]).expanduser()
     if not path.is_file():
-        raise InputError(path, "--teacher", "residual checkpoint not found (train one with `lessmimic physicalize-residual`)")
+        raise InputError(
+            path, "--teacher", "residual checkpoint not found (train one with `lessmimic physicalize-residual`)"
+        )
     return TeacherSpec("base+residual", path, hashlib.sha256(path.read_bytes()).hexdigest())
 
 
@@ -92,7 +96,9 @@ class ClipResult:
 def _scene_for(clip: RobotClip, profile: str):
     from pipeline.scene import SceneObject, build_scene
 
-    return build_scene([SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in clip.objects], profile)
+    return build_scene(
+        [SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in clip.objects], profile
+    )
 
 
 REFERENCES = ("raw", "planned", "feasible")
@@ -126,12 +132,22 @@ def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "
     elif reference == "feasible":
         stats: dict = {}
         hands = pre = None
-        if grasp:  # hands held on an object move with its reference track (the retargeted hands drift off it): the IK re-solves the arms onto that
+        # hands held on an object move with its reference track (the retargeted hands drift off it): the IK re-solves
+        # the arms onto that
+        if grasp:
             pre = grasp_schedule(scene, ref, clip.contact_links, clip.contacts, {o.name: o.pose for o in clip.objects})
             hands = None if pre is None else pre.hand_body_targets()
-        plan_fn = plan_com if pre is None else partial(plan_com, loads=HandLoads(pre.attached, pre.force, float(m.body_subtreemass[m.body("pelvis").id])))
+        plan_fn = (
+            plan_com
+            if pre is None
+            else partial(
+                plan_com, loads=HandLoads(pre.attached, pre.force, float(m.body_subtreemass[m.body("pelvis").id]))
+            )
+        )
         seat = ref.seat
-        ref = feasible_reference(m, ref, plan_fn, stats=stats, objects=obj_q if clip.objects else None, hand_targets=hands)
+        ref = feasible_reference(
+            m, ref, plan_fn, stats=stats, objects=obj_q if clip.objects else None, hand_targets=hands
+        )
         ref.seat = seat
         zmp = stats["plan"][2]
     objects = {o.name: o.pose for o in clip.objects}
@@ -147,18 +163,26 @@ def _reference_figures(scene, ref, fps: float) -> tuple[dict, str]:
     from physicalize.static_torque import static_torque_figures
 
     loads = None if ref.grasp is None else (ref.grasp.offset, ref.grasp.force)
-    figures = static_torque_figures(ref.qpos, loads, scene.profile.effort_limit, fps)  # what the reference asks of the upper body
+    figures = static_torque_figures(
+        ref.qpos, loads, scene.profile.effort_limit, fps
+    )  # what the reference asks of the upper body
     if ref.grasp is None:
         held = outside = np.zeros(0, bool)
     else:
         held = ref.grasp.grasped.any(axis=1)
         outside = held & ~ref.grasp.friction_ok
     figures["reference_grasp_outside_friction_frac"] = float(outside.sum() / max(held.sum(), 1))  # of the held frames
-    cause = f"; the hands' planned force leaves their friction cones from t={np.flatnonzero(outside)[0] / fps:.2f} s" if outside.any() else ""
+    cause = (
+        f"; the hands' planned force leaves their friction cones from t={np.flatnonzero(outside)[0] / fps:.2f} s"
+        if outside.any()
+        else ""
+    )
     return figures, cause  # a cause no controller can overcome
 
 
-def _figures(scene, roll: Rollout, clip: RobotClip, objects, qpos0, qvel0, perturb, reference: tuple[dict, str]) -> dict:
+def _figures(
+    scene, roll: Rollout, clip: RobotClip, objects, qpos0, qvel0, perturb, reference: tuple[dict, str]
+) -> dict:
     """The validity figures of one rollout (:mod:`physicalize.validate`), its reference's figures
     (:func:`_reference_figures`) and the open-loop replay check."""
     from physicalize.rollout import replay
@@ -172,12 +196,22 @@ def _figures(scene, roll: Rollout, clip: RobotClip, objects, qpos0, qvel0, pertu
     figures["replay_err_max_m"] = float(np.abs(np.vstack([qs[:-1] - roll.qpos, qs[-1:] - roll.final_qpos])).max())
     if figures["replay_err_max_m"] > REPLAY_TOL_M and perturb is None:
         figures["valid"] = False
-        figures["reason"] = "; ".join(filter(None, [figures["reason"], f"replay error {figures['replay_err_max_m']:.3g} m > {REPLAY_TOL_M:g}"]))
+        figures["reason"] = "; ".join(
+            filter(None, [figures["reason"], f"replay error {figures['replay_err_max_m']:.3g} m > {REPLAY_TOL_M:g}"])
+        )
     return figures
 
 
-def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str = "feasible", perturb=None,
-                     teacher: str = "base", grasp: bool = True, gains: tuple[WBCConfig, ...] | None = None) -> tuple[RobotClip | None, Rollout, dict, dict]:  # fmt: skip
+def physicalize_clip(
+    clip: RobotClip,
+    *,
+    profile: str = "mjlab",
+    reference: str = "feasible",
+    perturb=None,
+    teacher: str = "base",
+    grasp: bool = True,
+    gains: tuple[WBCConfig, ...] | None = None,
+) -> tuple[RobotClip | None, Rollout, dict, dict]:
     """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
     ``reference`` (see :func:`tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`).
 
@@ -198,14 +232,26 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
     t0, cpu0 = time.perf_counter(), time.process_time()
     scene, ref, objects, zmp = tracking_problem(clip, profile, reference, grasp)
     qpos0, qvel0 = initial_state(scene, ref, objects)
-    tried, wall, cpu = [], time.perf_counter() - t0, time.process_time() - cpu0  # planning + tracking, every attempt (not the checks)
+    tried, wall, cpu = (
+        [],
+        time.perf_counter() - t0,
+        time.process_time() - cpu0,
+    )  # planning + tracking, every attempt (not the checks)
     ref_figures = _reference_figures(scene, ref, clip.fps)
     if ref_figures[0]["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT:
         gains = gains[:1]  # no gains make a pressing hand pull
     for config in gains:
         t0, cpu0 = time.perf_counter(), time.process_time()
-        roll = simulate(scene, ref, WholeBodyController(scene.model, scene.profile, config), qpos0, qvel0, contact_links=clip.contact_links,
-                        perturb=perturb, residual=residual)  # fmt: skip
+        roll = simulate(
+            scene,
+            ref,
+            WholeBodyController(scene.model, scene.profile, config),
+            qpos0,
+            qvel0,
+            contact_links=clip.contact_links,
+            perturb=perturb,
+            residual=residual,
+        )
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
         tried.append((roll, _figures(scene, roll, clip, objects, qpos0, qvel0, perturb, ref_figures)))
         if tried[-1][1]["valid"]:
@@ -213,23 +259,51 @@ def physicalize_clip(clip: RobotClip, *, profile: str = "mjlab", reference: str 
     kept = len(tried) - 1 if tried[-1][1]["valid"] else 0
     roll, figures = tried[kept]
     if not figures["valid"] and len(tried) > 1:
-        figures["reason"] += "".join(f"; gain set {k}: {f['reason'].split(';')[0]}" for k, (_, f) in enumerate(tried[1:], 1))
+        figures["reason"] += "".join(
+            f"; gain set {k}: {f['reason'].split(';')[0]}" for k, (_, f) in enumerate(tried[1:], 1)
+        )
     figures["teacher_gains"], figures["teacher_attempts"] = kept, len(tried)
     roll.seconds = wall
     figures["realtime_factor"] = roll.frames / clip.fps / max(wall, 1e-9)
-    figures["realtime_factor_per_core"] = roll.frames / clip.fps / max(cpu, 1e-9)  # CPU time of this (single-threaded) process
+    figures["realtime_factor_per_core"] = (
+        roll.frames / clip.fps / max(cpu, 1e-9)
+    )  # CPU time of this (single-threaded) process
     T = roll.frames
-    sim_objects = tuple(replace(o, pose=roll.qpos[:, scene.object_qpos_adr[o.name] : scene.object_qpos_adr[o.name] + 7],
-                                contact=None if o.contact is None else o.contact[:T]) for o in clip.objects)  # fmt: skip
+    sim_objects = tuple(
+        replace(
+            o,
+            pose=roll.qpos[:, scene.object_qpos_adr[o.name] : scene.object_qpos_adr[o.name] + 7],
+            contact=None if o.contact is None else o.contact[:T],
+        )
+        for o in clip.objects
+    )
     robot = RobotClip(
-        roll.qpos[:, :36], clip.fps, clip.source, objects=sim_objects, contact_links=clip.contact_links,
-        contacts=roll.contact if clip.contact_links else None, method="lessmimic-wbc" + ("+residual" if residual is not None else ""), task=clip.task,
-        provenance={**clip.provenance, "teacher": teacher, **({"teacher_sha256": spec.digest} if spec.digest else {}), "actuator_profile": profile, "reference": reference,
-                    "teacher_gains": kept},
-    )  # fmt: skip
-    com = {"reference": ref.com[:T], "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T], "zmp_planned": None if zmp is None else zmp[:T],
-           "simulated": _sim_com(scene.model, roll.qpos), "pelvis_ref": clip.qpos[:T, 2], "pelvis_sim": roll.qpos[:, 2],
-           "support": _support_box(ref)[:T]}  # fmt: skip
+        roll.qpos[:, :36],
+        clip.fps,
+        clip.source,
+        objects=sim_objects,
+        contact_links=clip.contact_links,
+        contacts=roll.contact if clip.contact_links else None,
+        method="lessmimic-wbc" + ("+residual" if residual is not None else ""),
+        task=clip.task,
+        provenance={
+            **clip.provenance,
+            "teacher": teacher,
+            **({"teacher_sha256": spec.digest} if spec.digest else {}),
+            "actuator_profile": profile,
+            "reference": reference,
+            "teacher_gains": kept,
+        },
+    )
+    com = {
+        "reference": ref.com[:T],
+        "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T],
+        "zmp_planned": None if zmp is None else zmp[:T],
+        "simulated": _sim_com(scene.model, roll.qpos),
+        "pelvis_ref": clip.qpos[:T, 2],
+        "pelvis_sim": roll.qpos[:, 2],
+        "support": _support_box(ref)[:T],
+    }
     return robot, roll, figures, com
 
 
@@ -269,7 +343,9 @@ def _run_one(index: int, clip: RobotClip, work: Path, teacher: str, profile: str
         robot, roll, figures, com = physicalize_clip(clip, profile=profile, teacher=teacher)
         result = ClipResult(index, clip.source, robot, roll, figures, com)
     except Exception as exc:  # noqa: BLE001 - a clip that cannot be simulated is reported, the batch goes on
-        result = ClipResult(index, clip.source, None, None, {"valid": False, "reason": f"error: {type(exc).__name__}: {exc}"}, {})
+        result = ClipResult(
+            index, clip.source, None, None, {"valid": False, "reason": f"error: {type(exc).__name__}: {exc}"}, {}
+        )
     tmp = cached.with_suffix(".tmp")
     tmp.write_bytes(pickle.dumps(result))
     tmp.replace(cached)
@@ -277,20 +353,20 @@ def _run_one(index: int, clip: RobotClip, work: Path, teacher: str, profile: str
 
 
 CARD_NOTES = [
-    "Each episode is a closed-loop MuJoCo simulation (200 Hz physics, 50 Hz control) of the G1 tracking a retargeted clip "
-    "with a training-free whole-body QP controller (the `base` teacher) on a dynamically feasible reference (a ZMP preview-"
-    "control CoM plan over the clip's foot support schedule, the whole body re-solved onto it by IK keeping the "
-    "footsteps, hands and posture). Objects are free bodies moved only by contact: no welds, no "
-    "external or root assist forces. The controller's QP gain sets are tried in order per clip and the first valid "
-    "rollout is kept (its index: `teacher_gains` in the episode's validation figures).",
-    "`action` is the 29 joint position targets the position actuators held from frame t to t+1 (actuator profile in the "
-    "card header); `observation.torque` the actuator torques applied (mean over the 4 physics steps of the hold).",
-    "`observation.state`/`observation.qvel` are the simulation's qpos/qvel (root linear velocity world frame, root angular "
-    "velocity body frame); `reference.state` the retargeted qpos the controller tracked.",
+    "Each episode is a closed-loop MuJoCo simulation (200 Hz physics, 50 Hz control) of the G1 tracking a retargeted "
+    "clip with a training-free whole-body QP controller (the `base` teacher) on a dynamically feasible reference (a "
+    "ZMP preview-control CoM plan over the clip's foot support schedule, the whole body re-solved onto it by IK "
+    "keeping the footsteps, hands and posture). Objects are free bodies moved only by contact: no welds, no external "
+    "or root assist forces. The controller's QP gain sets are tried in order per clip and the first valid rollout is "
+    "kept (its index: `teacher_gains` in the episode's validation figures).",
+    "`action` is the 29 joint position targets the position actuators held from frame t to t+1 (actuator profile in "
+    "the card header); `observation.torque` the actuator torques applied (mean over the 4 physics steps of the hold).",
+    "`observation.state`/`observation.qvel` are the simulation's qpos/qvel (root linear velocity world frame, root "
+    "angular velocity body frame); `reference.state` the retargeted qpos the controller tracked.",
     "Replaying `action` open loop from the first frame's state (and the objects' first poses, at rest) in MuJoCo "
     "reproduces the states (checked per clip: `replay_err_max_m` in report.json).",
-    "Per-clip validity figures are in each episode's metadata and in `report.json`; invalid clips are not in the dataset "
-    "unless the stage ran with --keep-invalid.",
+    "Per-clip validity figures are in each episode's metadata and in `report.json`; invalid clips are not in the "
+    "dataset unless the stage ran with --keep-invalid.",
 ]
 
 
@@ -298,7 +374,16 @@ def _physicalized(r: ClipResult) -> PhysicalizedClip:
     """The clip as the dataset stores it: the simulated motion and what the simulation measured."""
     roll, T = r.rollout, r.robot.frames
     vel = tuple(roll.qvel[:, 35 + 6 * k : 41 + 6 * k] for k in range(len(r.robot.objects)))
-    return PhysicalizedClip(r.robot, roll.qvel[:, :35], vel, roll.action, roll.torque, roll.foot_force, r.com["reference_qpos"][:T], r.figures)
+    return PhysicalizedClip(
+        r.robot,
+        roll.qvel[:, :35],
+        vel,
+        roll.action,
+        roll.torque,
+        roll.foot_force,
+        r.com["reference_qpos"][:T],
+        r.figures,
+    )
 
 
 def run_fingerprint(src: Path, spec: TeacherSpec, profile: str, keep_invalid: bool) -> str:
@@ -306,15 +391,25 @@ def run_fingerprint(src: Path, spec: TeacherSpec, profile: str, keep_invalid: bo
     the teacher (with its checkpoint's digest, not its path), the actuator profile and ``keep_invalid``."""
     from pipeline.stage_state import dataset_fingerprint, fingerprint
 
-    return fingerprint(stage="physicalized", retargeted=dataset_fingerprint(src), teacher=spec.name, teacher_sha256=spec.digest,
-                       actuator_profile=profile, keep_invalid=keep_invalid)  # fmt: skip
+    return fingerprint(
+        stage="physicalized",
+        retargeted=dataset_fingerprint(src),
+        teacher=spec.name,
+        teacher_sha256=spec.digest,
+        actuator_profile=profile,
+        keep_invalid=keep_invalid,
+    )
 
 
-def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", profile: str = "mjlab", keep_invalid: bool = False) -> dict:
+def run_stage(
+    name: str, *, overwrite: bool = False, teacher: str = "base", profile: str = "mjlab", keep_invalid: bool = False
+) -> dict:
     """``lessmimic physicalize``: simulate every retargeted clip, write the dataset, report and logs.
     Without ``overwrite``, a run whose logs report records this run's :func:`run_fingerprint`, and whose
     dataset exists (or kept no clip), is up to date: that report comes back with ``"up_to_date": True``
     and nothing is done."""
+    from physicalize.plot import plot_physicalized
+    from physicalize.validate import summarise
     from pipeline.clip_dataset import episodes_to_robot_clips, physicalized_clips_to_episodes
     from pipeline.dataset import write_dataset
     from pipeline.dataset_card import DatasetCard
@@ -323,8 +418,6 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
     from pipeline.inspect_log import write_robot_log
     from pipeline.robot import actuator_profile
     from pipeline.stage_state import KEY, up_to_date
-    from physicalize.plot import plot_physicalized
-    from physicalize.validate import summarise
 
     spec = parse_teacher(teacher)
     try:
@@ -335,12 +428,20 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
         try:
             trained_for = _load_residual(str(spec.checkpoint), spec.digest).cfg.profile
         except Exception as exc:  # noqa: BLE001 - any unreadable checkpoint is a one-line input error
-            raise InputError(spec.checkpoint, "--teacher", f"unreadable residual checkpoint: {type(exc).__name__}: {exc}") from None
+            raise InputError(
+                spec.checkpoint, "--teacher", f"unreadable residual checkpoint: {type(exc).__name__}: {exc}"
+            ) from None
         if trained_for != prof.name:
-            raise InputError(spec.checkpoint, "--teacher", f"residual trained for actuator profile {trained_for!r}, this run uses {prof.name!r}")
+            raise InputError(
+                spec.checkpoint,
+                "--teacher",
+                f"residual trained for actuator profile {trained_for!r}, this run uses {prof.name!r}",
+            )
     src, out = stage_dir(name, "retargeted"), stage_dir(name, "physicalized")
     if not (src / "meta" / "info.json").is_file():
-        raise InputError(src, "meta/info.json", "no retargeted dataset here: run `lessmimic retarget --name NAME` first")
+        raise InputError(
+            src, "meta/info.json", "no retargeted dataset here: run `lessmimic retarget --name NAME` first"
+        )
     fp, logs = run_fingerprint(src, spec, prof.name, keep_invalid), out.parent / "logs" / "physicalized"
     recorded = None if overwrite else up_to_date(logs / "report.json", fp)
     if recorded is not None and (out.is_dir() or not recorded["summary"].get("episodes_written")):
@@ -352,7 +453,9 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
     if overwrite:
         shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True, exist_ok=True)
-    results = [_run_one(i, c, work, teacher, prof.name) for i, c in enumerate(tqdm(clips, desc="physicalize", unit="clip"))]
+    results = [
+        _run_one(i, c, work, teacher, prof.name) for i, c in enumerate(tqdm(clips, desc="physicalize", unit="clip"))
+    ]
     for r, c in zip(results, clips):
         if r.com:
             r.com["reference_qpos"] = c.qpos
@@ -360,29 +463,49 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
     kept = [r for r in results if r.robot is not None and (r.figures["valid"] or keep_invalid)]
     simulated = sum(r.rollout.frames for r in results if r.rollout is not None) / clips[0].fps if clips else 0.0
     report = {
-        "stage": "physicalized", "teacher": teacher, "teacher_sha256": spec.digest, "actuator_profile": prof.name, "keep_invalid": keep_invalid,
-        "clips": per_clip, "summary": {**summarise([c for c in per_clip if "frames" in c] or per_clip),
-                                         "valid_frac": float(np.mean([c["valid"] for c in per_clip])) if per_clip else 0.0,
-                                         "realtime_factor": simulated / max(sum(r.rollout.seconds for r in results if r.rollout), 1e-9),
-                                         "episodes_written": len(kept)}, KEY: fp,
-    }  # fmt: skip
+        "stage": "physicalized",
+        "teacher": teacher,
+        "teacher_sha256": spec.digest,
+        "actuator_profile": prof.name,
+        "keep_invalid": keep_invalid,
+        "clips": per_clip,
+        "summary": {
+            **summarise([c for c in per_clip if "frames" in c] or per_clip),
+            "valid_frac": float(np.mean([c["valid"] for c in per_clip])) if per_clip else 0.0,
+            "realtime_factor": simulated / max(sum(r.rollout.seconds for r in results if r.rollout), 1e-9),
+            "episodes_written": len(kept),
+        },
+        KEY: fp,
+    }
     for c in per_clip:
         if not c["valid"]:
             print(f"invalid: {c['source']}: {c['reason']}")
     if kept:
         fps = int(round(clips[0].fps))
         features, episodes = physicalized_clips_to_episodes([_physicalized(r) for r in kept])
-        teacher_note = f"Teacher: `{teacher}`" + (f" (checkpoint sha256 {spec.digest}): the base QP controller's joint targets plus a learned "
-                                                   "residual (PPO, physicalize.residual), used deterministically (mean action)." if spec.digest else ".")
+        teacher_note = f"Teacher: `{teacher}`" + (
+            f" (checkpoint sha256 {spec.digest}): the base QP controller's joint targets plus a learned "
+            "residual (PPO, physicalize.residual), used deterministically (mean action)."
+            if spec.digest
+            else "."
+        )
         synthetic = any(r.robot.provenance.get("synthetic") for r in kept)
         card = DatasetCard(
             title=f"{name}: G1 physicalized state-action data",
-            description=("SYNTHETIC demonstrations: " if synthetic else "") + "retargeted G1 motion made physically valid by "
-            f"closed-loop tracking in MuJoCo (teacher `{teacher}`: whole-body QP" + (" + learned residual" if spec.digest else "") + "); every episode carries its validation figures.",
-            provenance=[r.source for r in kept] + [str(src)], fps=fps, synthetic=synthetic, stage="physicalized",
-            actuator_profile=f"{prof.name}: {prof.description}", license="apache-2.0" if synthetic else "other",
-            feature_frames={f.name: "world, z-up" if f.name.startswith("object.") else "" for f in features}, notes=CARD_NOTES + [teacher_note],
-        )  # fmt: skip
+            description=("SYNTHETIC demonstrations: " if synthetic else "")
+            + "retargeted G1 motion made physically valid by "
+            f"closed-loop tracking in MuJoCo (teacher `{teacher}`: whole-body QP"
+            + (" + learned residual" if spec.digest else "")
+            + "); every episode carries its validation figures.",
+            provenance=[r.source for r in kept] + [str(src)],
+            fps=fps,
+            synthetic=synthetic,
+            stage="physicalized",
+            actuator_profile=f"{prof.name}: {prof.description}",
+            license="apache-2.0" if synthetic else "other",
+            feature_frames={f.name: "world, z-up" if f.name.startswith("object.") else "" for f in features},
+            notes=CARD_NOTES + [teacher_note],
+        )
         write_dataset(out, f"lessmimic/{name}-physicalized", fps, features, episodes, card=card, overwrite=overwrite)
     elif out.is_dir():  # --overwrite and nothing kept: the old dataset is not this run's output
         shutil.rmtree(out)
@@ -390,11 +513,14 @@ def run_stage(name: str, *, overwrite: bool = False, teacher: str = "base", prof
         stem = f"{r.index:03d}_{file_stem(r.source)}"
         write_robot_log(r.robot, logs / f"{stem}.mcap")
         objs = {o.name: (clips[r.index].objects[k].pose[:, 2], o.pose[:, 2]) for k, o in enumerate(r.robot.objects)}
-        title = f"{r.source} ({r.robot.task or 'no task'}): {'valid' if r.figures['valid'] else 'INVALID: ' + r.figures['reason']}"
+        verdict = "valid" if r.figures["valid"] else "INVALID: " + r.figures["reason"]
+        title = f"{r.source} ({r.robot.task or 'no task'}): {verdict}"
         plot_physicalized(r.com, r.rollout.foot_force, objs, r.robot.fps, title[:150], logs / f"{stem}.png")
     report["seconds_wall"] = time.perf_counter() - t0
     if kept:
         write_json_atomic(out / "report.json", report)
-    write_json_atomic(logs / "report.json", report)  # also where it lives when no clip was valid; last: its fingerprint marks a finished run
+    write_json_atomic(
+        logs / "report.json", report
+    )  # also where it lives when no clip was valid; last: its fingerprint marks a finished run
     shutil.rmtree(work, ignore_errors=True)
     return report

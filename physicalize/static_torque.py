@@ -27,8 +27,11 @@ from pipeline.robot import G1_JOINT_NAMES, g1_pinocchio_model, pinocchio_qpos
 UPPER_BODY_JOINTS = G1_JOINT_NAMES[G1_JOINT_NAMES.index("waist_yaw_joint") :]
 
 
-def static_torques(qpos: np.ndarray, hand_loads: tuple[np.ndarray, np.ndarray] | None = None,
-                   joints: tuple[str, ...] = UPPER_BODY_JOINTS) -> np.ndarray:  # fmt: skip
+def static_torques(
+    qpos: np.ndarray,
+    hand_loads: tuple[np.ndarray, np.ndarray] | None = None,
+    joints: tuple[str, ...] = UPPER_BODY_JOINTS,
+) -> np.ndarray:
     """``(T, len(joints))`` static torques [N m] of the robot poses ``qpos`` (T, 36), MuJoCo order.
     ``hand_loads``: ``(offset (2, 3), force (T, 2, 3))``, the force each hand (left, right) applies
     to what it holds at ``offset`` in its hand body's frame, world frame (the grasp schedule's
@@ -53,12 +56,17 @@ def static_torques(qpos: np.ndarray, hand_loads: tuple[np.ndarray, np.ndarray] |
     return out
 
 
-def static_torque_figures(qpos: np.ndarray, hand_loads: tuple[np.ndarray, np.ndarray] | None, effort: np.ndarray, fps: float) -> dict:
+def static_torque_figures(
+    qpos: np.ndarray, hand_loads: tuple[np.ndarray, np.ndarray] | None, effort: np.ndarray, fps: float
+) -> dict:
     """``reference_static_torque_ratio_max`` (max over frames and upper-body joints of ``|tau_s| / tau_max``;
     ``effort``: the 29 effort limits in :data:`pipeline.robot.G1_JOINT_NAMES` order),
     ``reference_static_torque_joint`` and ``reference_static_torque_at_s``: where it is."""
     effort = np.asarray(effort, float)[[G1_JOINT_NAMES.index(j) for j in UPPER_BODY_JOINTS]]
     ratio = np.abs(static_torques(qpos, hand_loads)) / effort
     t, i = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
-    return {"reference_static_torque_ratio_max": float(ratio[t, i]), "reference_static_torque_joint": UPPER_BODY_JOINTS[i],
-            "reference_static_torque_at_s": float(t / fps)}  # fmt: skip
+    return {
+        "reference_static_torque_ratio_max": float(ratio[t, i]),
+        "reference_static_torque_joint": UPPER_BODY_JOINTS[i],
+        "reference_static_torque_at_s": float(t / fps),
+    }

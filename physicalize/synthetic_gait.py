@@ -39,8 +39,16 @@ def _yaw_quat(yaw: float) -> np.ndarray:
     return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
 
 
-def footstep_gait(scene: Scene, footsteps: list[tuple[int, np.ndarray, float]], *, stand_s: float = 1.0, swing_s: float = 0.5,
-                  double_s: float = 0.25, lift_m: float = 0.06, end_s: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+def footstep_gait(
+    scene: Scene,
+    footsteps: list[tuple[int, np.ndarray, float]],
+    *,
+    stand_s: float = 1.0,
+    swing_s: float = 0.5,
+    double_s: float = 0.25,
+    lift_m: float = 0.06,
+    end_s: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(qpos (T, 36), foot_pos (T, 2, 3), foot_yaw (T, 2))``: the kinematic gait of ``footsteps``
     ``[(foot 0 left / 1 right, (x, y) target, yaw target)]`` starting from the default standing pose."""
     m = scene.model
@@ -58,7 +66,7 @@ def footstep_gait(scene: Scene, footsteps: list[tuple[int, np.ndarray, float]], 
     t = n_stand
     for k, xy, psi in footsteps:
         p0, y0 = pos[t - 1, k].copy(), yaw[t - 1, k]
-        s = (np.arange(1, n_swing + 1) / n_swing)
+        s = np.arange(1, n_swing + 1) / n_swing
         a = _smooth(s)[:, None]
         pos[t : t + n_swing, k, :2] = (1 - a) * p0[:2] + a * np.asarray(xy)
         pos[t : t + n_swing, k, 2] = start[k, 2] + lift_m * np.sin(np.pi * s)
@@ -81,10 +89,14 @@ def footstep_gait(scene: Scene, footsteps: list[tuple[int, np.ndarray, float]], 
             foot_tasks[k].set_target(mink.SE3.from_rotation_and_translation(mink.SO3(_yaw_quat(yaw[t, k])), pos[t, k]))
         mid = pos[t].mean(axis=0)
         psi = yaw[t].mean()
-        pelvis_task.set_target(mink.SE3.from_rotation_and_translation(mink.SO3(_yaw_quat(psi)), np.array([mid[0], mid[1], pelvis_h])))
+        pelvis_task.set_target(
+            mink.SE3.from_rotation_and_translation(mink.SO3(_yaw_quat(psi)), np.array([mid[0], mid[1], pelvis_h]))
+        )
         torso_task.set_target(mink.SE3.from_rotation_and_translation(mink.SO3(_yaw_quat(psi)), np.zeros(3)))
         for _ in range(30 if t == 0 else 4):
-            dq = mink.solve_ik(config, [*foot_tasks, pelvis_task, torso_task, posture], 1.0, "daqp", damping=1e-2, limits=limits)
+            dq = mink.solve_ik(
+                config, [*foot_tasks, pelvis_task, torso_task, posture], 1.0, "daqp", damping=1e-2, limits=limits
+            )
             config.integrate_inplace(dq, 1.0)
         out[t] = config.q[:36]
     return place_on_floor(m, out), pos, yaw
@@ -100,7 +112,9 @@ def stepping_in_place(scene: Scene, steps: int = 10, **kw) -> tuple[np.ndarray, 
     return footstep_gait(scene, footsteps, **kw)[0], footsteps
 
 
-def walk_with_turn(scene: Scene, steps: int = 10, step_m: float = 0.12, turn_rad: float = np.pi / 4, **kw) -> tuple[np.ndarray, list]:
+def walk_with_turn(
+    scene: Scene, steps: int = 10, step_m: float = 0.12, turn_rad: float = np.pi / 4, **kw
+) -> tuple[np.ndarray, list]:
     """``(qpos, footsteps)`` of a walk of ``steps`` steps curving left by ``turn_rad`` (left foot first).
 
     Footstep ``i`` lands at arc length ``s_i = (i + 1) step_m`` of the centre line (the last one

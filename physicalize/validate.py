@@ -89,7 +89,9 @@ def _quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return 2.0 * np.arccos(np.clip(np.abs(np.sum(a * b, axis=-1)), 0.0, 1.0))
 
 
-def validate(scene: Scene, rollout: Rollout, ref_qpos: np.ndarray, ref_objects: dict[str, np.ndarray], bars: Bars = Bars()) -> dict:
+def validate(
+    scene: Scene, rollout: Rollout, ref_qpos: np.ndarray, ref_objects: dict[str, np.ndarray], bars: Bars = Bars()
+) -> dict:
     """The report entry of one clip (see the module docstring); ``ref_qpos`` (T, 36) at the control rate."""
     m, T_ref, T = scene.model, len(ref_qpos), rollout.frames
     fps = 1.0 / (m.opt.timestep * SUBSTEPS)
@@ -102,19 +104,22 @@ def validate(scene: Scene, rollout: Rollout, ref_qpos: np.ndarray, ref_objects: 
     foot_xy = sim_links[:, [G1_LINK_NAMES.index(b) for b in FOOT_BODIES], :2]
     root_err = np.linalg.norm(q[:, :3] - ref_qpos[:T, :3], axis=1)
     figures = {
-        "frames": T_ref, "frames_simulated": T,
+        "frames": T_ref,
+        "frames_simulated": T,
         "external_force_max_n": float(rollout.external_force.max(initial=0.0)),
         "root_residual_max_n": root_residual(m, q, rollout.qvel, rollout.action),
         "penetration_max_m": float(rollout.penetration.max(initial=0.0)),
         "foot_slide_frac_1cm_per_frame": foot_slide_frac(foot_xy, rollout.foot_force > LOADED_N),
-        "torque_saturation_frac": float((np.abs(rollout.torque) >= 0.99 * scene.profile.effort_limit).any(axis=1).mean()),
+        "torque_saturation_frac": float(
+            (np.abs(rollout.torque) >= 0.99 * scene.profile.effort_limit).any(axis=1).mean()
+        ),
         "joint_limit_violation_frac": float(((joints < lo - LIMIT_TOL) | (joints > hi + LIMIT_TOL)).any(axis=1).mean()),
         "mpjpe_m": float(np.linalg.norm(sim_links - ref_links, axis=-1).mean()),
         "root_pos_err_max_m": float(root_err.max()),
         "fell": rollout.fell_at is not None,
         "qp_failures": rollout.qp_failures,
         "realtime_factor": T / fps / max(rollout.seconds, 1e-9),
-    }  # fmt: skip
+    }
     obj_pos, obj_rot, lost_at = [], [], None
     for name, adr in scene.object_qpos_adr.items():
         ref = ref_objects[name][:T]

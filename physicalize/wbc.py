@@ -5,11 +5,11 @@ accelerations ``qdd`` (35: free root + 29 joints) and the 3-D contact forces ``f
 sole corners of each stance foot and, while seated, at the seat's support points (:mod:`physicalize.seat`)::
 
     min   sum_i w_i || J_i qdd + Jdot_i qd - a_i* ||^2  +  w_q ||qdd||^2  +  w_f ||f||^2
-    s.t.  M_u qdd + h_u = J_{c,u}^T f + tau_ext,u              (floating base, 6 rows: no root actuation)
-          J_foot qdd + Jdot_foot qd = a_foot*                   (stance feet, 6 rows each; seat points 3 rows, alike)
-          |f.t_i| <= mu f.n / sqrt 2,  f.n >= 0                (friction pyramids inscribed in the cones per contact point)
+    s.t.  M_u qdd + h_u = J_{c,u}^T f + tau_ext,u      (floating base, 6 rows: no root actuation)
+          J_foot qdd + Jdot_foot qd = a_foot*           (stance feet, 6 rows each; seat points 3 rows, alike)
+          |f.t_i| <= mu f.n / sqrt 2,  f.n >= 0        (friction pyramids inscribed in the cones, per point)
           -e tau_max <= M_a qdd + h_a - J_{c,a}^T f - tau_ext,a <= e tau_max   (e = effort_scale, 0.95)
-          G qdd - s <= h,  s >= 0,  + w_s ||s||^2                 (soft rows: joint ranges, touchdown, legs off objects; wbc_rows)
+          G qdd - s <= h,  s >= 0,  + w_s ||s||^2       (soft rows: joint ranges, touchdown, legs off objects)
 
 ``M`` and ``h = qfrc_bias - qfrc_passive`` come from the simulation's own model (so the held
 object's inertia is not in ``M``, but its measured contact forces on the robot are in
@@ -25,7 +25,8 @@ object that lags its reference position by ``e`` with ``|e| > hand_lead`` moves 
 of running ahead and pushing the robot off its feet).
 
 Support comes from the schedule corrected by the simulation's contacts, and the swing foot lands
-where the divergent component of motion ``xi = c + c_dot / omega`` can be caught (:meth:`physicalize.stepping.Stepping.adapt`:
+where the divergent component of motion ``xi = c + c_dot / omega`` can be caught
+(:meth:`physicalize.stepping.Stepping.adapt`:
 late and early touchdowns, capture-point step adjustment, the CoM target following the footholds
 taken); off while a seat or an object carries part of the weight.
 
@@ -51,7 +52,12 @@ from pipeline.scene import link_collision_geoms
 NV_ROBOT = 6 + NUM_JOINTS
 FOOT_BODIES = ("left_ankle_roll_link", "right_ankle_roll_link")
 HAND_BODIES = ("left_wrist_yaw_link", "right_wrist_yaw_link")
-GRIP_LINKS = ("elbow_link", "wrist_roll_link", "wrist_pitch_link", "wrist_yaw_link")  # forearm and hand: a held object's contacts on them are planned
+GRIP_LINKS = (
+    "elbow_link",
+    "wrist_roll_link",
+    "wrist_pitch_link",
+    "wrist_yaw_link",
+)  # forearm and hand: a held object's contacts on them are planned
 CONTROL_DT = 0.02
 CLEAR_LINKS = ("hip_roll", "hip_yaw", "knee", "ankle_pitch")  # leg links whose contact with an object is never planned
 
@@ -63,7 +69,11 @@ def sole_corners(model: mujoco.MjModel, body: str) -> np.ndarray:
     bid = model.body(body).id
     pts, bottom = [], []
     for g in range(model.ngeom):
-        if model.geom_bodyid[g] != bid or not model.geom_contype[g] or model.geom_type[g] != mujoco.mjtGeom.mjGEOM_CAPSULE:
+        if (
+            model.geom_bodyid[g] != bid
+            or not model.geom_contype[g]
+            or model.geom_type[g] != mujoco.mjtGeom.mjGEOM_CAPSULE
+        ):
             continue
         R = np.empty(9)
         mujoco.mju_quat2Mat(R, model.geom_quat[g])
@@ -77,7 +87,9 @@ def sole_corners(model: mujoco.MjModel, body: str) -> np.ndarray:
     x0, x1 = p[:, 0].min(), p[:, 0].max()
     heel, toe = p[np.abs(p[:, 0] - x0) < 0.02], p[np.abs(p[:, 0] - x1) < 0.02]
     z = min(bottom)
-    return np.array([[x0, heel[:, 1].min(), z], [x0, heel[:, 1].max(), z], [x1, toe[:, 1].min(), z], [x1, toe[:, 1].max(), z]])
+    return np.array(
+        [[x0, heel[:, 1].min(), z], [x0, heel[:, 1].max(), z], [x1, toe[:, 1].min(), z], [x1, toe[:, 1].max(), z]]
+    )
 
 
 def orientation_error(R_ref: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -104,15 +116,28 @@ class WholeBodyController:
         self.pelvis, self.torso = model.body("pelvis").id, model.body("torso_link").id
         self.feet = [model.body(b).id for b in FOOT_BODIES]
         self.hands = [model.body(b).id for b in HAND_BODIES]
-        self.grip_geoms = [{g for link in GRIP_LINKS for g in link_collision_geoms(model, f"{side}_{link}")} for side in ("left", "right")]
+        self.grip_geoms = [
+            {g for link in GRIP_LINKS for g in link_collision_geoms(model, f"{side}_{link}")}
+            for side in ("left", "right")
+        ]
         self.corners = np.stack([sole_corners(model, b) for b in FOOT_BODIES])
         self.robot_bodies = [b for b in range(1, model.nbody) if model.body_rootid[b] == self.pelvis]
         self.robot_mass = float(sum(model.body_mass[b] for b in self.robot_bodies))
         self.robot_geoms = {g for g in range(model.ngeom) if model.geom_bodyid[g] in set(self.robot_bodies)}
         self.floor = model.geom("floor").id
-        self.unseated_geoms = {g for g in self.robot_geoms if model.geom_bodyid[g] in self.feet} | set().union(*self.grip_geoms)  # never seat contacts
-        legs = [g for g in self.robot_geoms if model.geom_contype[g] and any(k in model.body(model.geom_bodyid[g]).name for k in CLEAR_LINKS)]
-        objects = [g for g in range(model.ngeom) if model.geom_contype[g] and model.geom_bodyid[g] and g not in self.robot_geoms]
+        self.unseated_geoms = {g for g in self.robot_geoms if model.geom_bodyid[g] in self.feet} | set().union(
+            *self.grip_geoms
+        )  # never seat contacts
+        legs = [
+            g
+            for g in self.robot_geoms
+            if model.geom_contype[g] and any(k in model.body(model.geom_bodyid[g]).name for k in CLEAR_LINKS)
+        ]
+        objects = [
+            g
+            for g in range(model.ngeom)
+            if model.geom_contype[g] and model.geom_bodyid[g] and g not in self.robot_geoms
+        ]
         self.clear_pairs = [(g, o) for g in legs for o in objects]
         self.hip_geoms = {g for g in legs if "hip" in model.body(model.geom_bodyid[g]).name}
         self.effort = profile.effort_limit
@@ -218,7 +243,14 @@ class WholeBodyController:
             else:
                 ep = target.foot_pos[k] - d.xpos[fb]
                 er = orientation_error(quat_mat(target.foot_quat[k]), R)
-                a = np.concatenate([cfg.swing_ff * target.foot_acc[k] + cfg.foot_kp * ep + cfg.foot_kd * (target.foot_vel[k] - v6[:3]), cfg.orient_kp * er - cfg.orient_kd * v6[3:]])
+                a = np.concatenate(
+                    [
+                        cfg.swing_ff * target.foot_acc[k]
+                        + cfg.foot_kp * ep
+                        + cfg.foot_kd * (target.foot_vel[k] - v6[:3]),
+                        cfg.orient_kp * er - cfg.orient_kd * v6[3:],
+                    ]
+                )
                 task(J6, a - b6, cfg.w_swing)
         if target.hand_pos is not None:  # hand point tasks; a held object's planned reaction -J^T f in tau_ext
             z3 = np.zeros((2, 3))
@@ -249,11 +281,17 @@ class WholeBodyController:
         qj, qdj = d.qpos[7 : 7 + NUM_JOINTS], qd[6:]
         Jq = np.zeros((NUM_JOINTS, nv))
         Jq[:, 6:] = np.eye(NUM_JOINTS)
-        task(Jq, target.qacc[6:] + cfg.posture_kp * (target.qpos[7:] - qj) + cfg.posture_kd * (target.qvel[6:] - qdj), cfg.w_posture)
+        task(
+            Jq,
+            target.qacc[6:] + cfg.posture_kp * (target.qpos[7:] - qj) + cfg.posture_kd * (target.qvel[6:] - qdj),
+            cfg.w_posture,
+        )
         P[:nv, :nv] += cfg.w_qdd * np.eye(nv)
         P[nv:, nv:] += cfg.w_force * np.eye(nf)
 
-        Jc = [np.zeros((0, nv))]  # contact point Jacobians (world frame): the stance feet's sole corners, then the seat's points
+        Jc = [
+            np.zeros((0, nv))
+        ]  # contact point Jacobians (world frame): the stance feet's sole corners, then the seat's points
         for k in stance:
             fb = self.feet[k]
             R = d.xmat[fb].reshape(3, 3)
@@ -263,7 +301,9 @@ class WholeBodyController:
         for k in stance:
             A.append(np.hstack([Jfeet[k][0], np.zeros((6, nf))]))
             b.append(Jfeet[k][1])
-        for sp in seats:  # a seat's support point is held like a stance foot, softly (held hard with the feet and the torque bounds, the QP was infeasible)
+        # a seat's support point is held like a stance foot, softly (held hard with the feet and the torque bounds, the
+        # QP was infeasible)
+        for sp in seats:
             jp, _, bp, _ = self._jac(d, sp.body, sp.point)
             Jc.append(jp)
             task(jp, -cfg.stance_kv * (jp @ qd) - bp, cfg.w_seat)
@@ -275,10 +315,18 @@ class WholeBodyController:
         if frames:
             Gc = np.zeros((5 * len(frames), n))
             for j, (fn, t1, t2) in enumerate(frames):
-                Gc[5 * j : 5 * j + 5, nv + 3 * j : nv + 3 * j + 3] = [t1 - mu * fn, -t1 - mu * fn, t2 - mu * fn, -t2 - mu * fn, -fn]
+                Gc[5 * j : 5 * j + 5, nv + 3 * j : nv + 3 * j + 3] = [
+                    t1 - mu * fn,
+                    -t1 - mu * fn,
+                    t2 - mu * fn,
+                    -t2 - mu * fn,
+                    -fn,
+                ]
             G.append(Gc)
             hv.append(np.zeros(5 * len(frames)))
-        if seats and cfg.seated_foot_load > 0:  # seated, each stance foot still carries a share of the weight (else the robot tipped back, feet in the air)
+        if (
+            seats and cfg.seated_foot_load > 0
+        ):  # seated, each stance foot still carries a share of the weight (else the robot tipped back, feet in the air)
             Gf = np.zeros((len(stance), n))
             for s in range(len(stance)):
                 Gf[s, nv + 12 * s + 2 : nv + 12 * s + 12 : 3] = -1.0

@@ -20,7 +20,9 @@ class WBCConfig:
     foot_kd: float = 40.0
     hand_kp: float = 100.0
     hand_kd: float = 20.0
-    hold_kp: float = 300.0  # a hand holding an object (omomo box lost at 2.64 s with hand_kp: the hands slid 5-15 cm up and down its faces; held to 3.56 s with these, and to the end with the feasible swing clearance)
+    # a hand holding an object (omomo box lost at 2.64 s with hand_kp: the hands slid 5-15 cm up and down its faces;
+    # held to 3.56 s with these, and to the end with the feasible swing clearance)
+    hold_kp: float = 300.0
     hold_kd: float = 35.0
     posture_kp: float = 100.0
     posture_kd: float = 20.0
@@ -37,36 +39,57 @@ class WBCConfig:
     seated_foot_load: float = 0.1  # least share of the weight on each stance foot while seated
     w_qdd: float = 1e-4
     w_force: float = 1e-5
-    effort_scale: float = 0.95  # the QP's torque bounds as a fraction of the actuators' effort limits (1.0: 31% of walk frames saturated)
+    effort_scale: float = (
+        0.95  # the QP's torque bounds as a fraction of the actuators' effort limits (1.0: 31% of walk frames saturated)
+    )
     joint_limits: bool = True  # the joint-range rows below (False: the QP knows no joint range)
     limit_rate: float = 15.0  # alpha [1/s] of the joint-range barrier (see physicalize.wbc_rows.limit_bounds)
     limit_zeta: float = 1.0  # damping ratio of the barrier (1: critically damped)
     limit_margin: float = 0.01  # the barrier keeps joints this far [rad] inside their MuJoCo range
     limit_active: float = 300.0  # a range row enters the QP when its bound on |qdd| is under this [rad/s^2]
-    touchdown_rate: float = 25.0  # a [1/s] of the swing-foot touchdown rows (0: none; see physicalize.wbc_rows.soft_rows)
-    touchdown_speed: float = 0.8  # m/s (0.5 fell in test_gait's -y push while walking): a descent-speed cap zdd >= -a (zd + speed)
+    touchdown_rate: float = (
+        25.0  # a [1/s] of the swing-foot touchdown rows (0: none; see physicalize.wbc_rows.soft_rows)
+    )
+    touchdown_speed: float = (
+        0.8  # m/s (0.5 fell in test_gait's -y push while walking): a descent-speed cap zdd >= -a (zd + speed)
+    )
     touchdown_zone: float = 0.10  # m: sole corners higher than this get no row
-    hand_lead: float = 0.05  # m: a held object farther than this from its reference position takes the hand targets along (the rest stays a bounded push towards the reference)
-    clearance: float = 0.0  # m: legs keep this far from objects (their contact is never planned; 0.01: the OMOMO clip fell at 0.62 s)
-    clearance_rate: float = 15.0  # a [1/s] of the clearance barrier (0: no rows; see physicalize.wbc_rows.clearance_rows)
+    # m: a held object farther than this from its reference position takes the hand targets along (the rest stays a
+    # bounded push towards the reference)
+    hand_lead: float = 0.05
+    clearance: float = (
+        0.0  # m: legs keep this far from objects (their contact is never planned; 0.01: the OMOMO clip fell at 0.62 s)
+    )
+    clearance_rate: float = (
+        15.0  # a [1/s] of the clearance barrier (0: no rows; see physicalize.wbc_rows.clearance_rows)
+    )
     clearance_zone: float = 0.05  # m: pairs farther than clearance + this get no row
     w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
     # contact state from the simulation
     contact_stance: bool = True
-    other_support: float = 0.2  # fraction of the weight carried by other contacts (a seat) that turns the stepping logic off
+    other_support: float = (
+        0.2  # fraction of the weight carried by other contacts (a seat) that turns the stepping logic off
+    )
     touch_force: float = 20.0  # N: a foot pressing the floor this hard is in contact
-    touchdown_height: float = 0.02  # m: a swing foot in contact whose reference sole is this low and not rising has landed
+    touchdown_height: float = (
+        0.02  # m: a swing foot in contact whose reference sole is this low and not rising has landed
+    )
     descend_speed: float = 0.3  # m/s: a stance foot not yet on the floor is driven down at this speed
     # capture-point (DCM) step adjustment of the swing foot's landing point
     step_gain: float = 1.0  # landing point shift per metre of DCM error
     step_max: float = 0.2  # m, largest shift
     com_anchor: float = 0.5  # the CoM target moves by this fraction of the stance feet's offset from their footsteps
-    min_foot_gap: float = 0.08  # m, least lateral distance of the swing foot from the stance foot (no crossing; 0.14 moved narrow footsteps outward: frames 4557 -> 4877)
+    # m, least lateral distance of the swing foot from the stance foot (no crossing; 0.14 moved narrow footsteps
+    # outward: frames 4557 -> 4877)
+    min_foot_gap: float = 0.08
 
 
-# The base teacher's gain sets, tried in order on a clip until one tracks it validly (physicalize.stage.physicalize_clip):
-# heavier horizontal CoM tasks make posture, orientation and hand tasks yield to balance. Alone, (5000, 5000, 1000) walks
-# 44 of the gait envelope's 50 walks (the first set 32) and the default Carry, but the OMOMO box falls and SitStand seeds
+# The base teacher's gain sets, tried in order on a clip until one tracks it validly
+# (physicalize.stage.physicalize_clip):
+# heavier horizontal CoM tasks make posture, orientation and hand tasks yield to balance. Alone, (5000, 5000, 1000)
+# walks
+# 44 of the gait envelope's 50 walks (the first set 32) and the default Carry, but the OMOMO box falls and SitStand
+# seeds
 # break on joint-limit frames: no single set was best on every clip (`make bench-physicalize`).
 TEACHER_GAINS: tuple[WBCConfig, ...] = (
     WBCConfig(),

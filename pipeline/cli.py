@@ -20,23 +20,41 @@ from pipeline.stage_state import up_to_date_line
 
 
 def _stage_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--input", default=None, help="mocap file or folder (BVH, OMOMO .pt, AMASS .npz, C3D, MCAP, keypoints .npz/.csv); default: embedded synthetic demos")
-    p.add_argument("--name", default="default", help="dataset name: outputs go to datasets/<NAME>/<stage>/ (default: default)")
+    p.add_argument(
+        "--input",
+        default=None,
+        help="mocap file or folder (BVH, OMOMO .pt, AMASS .npz, C3D, MCAP, keypoints .npz/.csv); default: embedded "
+        "synthetic demos",
+    )
+    p.add_argument(
+        "--name", default="default", help="dataset name: outputs go to datasets/<NAME>/<stage>/ (default: default)"
+    )
     p.add_argument("--overwrite", action="store_true", help="replace an existing output dataset")
-    p.add_argument("--body-model", default=None, help="SMPL-H / SMPL-X body model file or folder (needed for AMASS .npz)")
+    p.add_argument(
+        "--body-model", default=None, help="SMPL-H / SMPL-X body model file or folder (needed for AMASS .npz)"
+    )
 
 
 def _cmd_retarget(a: argparse.Namespace) -> int:
     from retarget.stage import run_stage
 
-    report = run_stage(a.input, a.name, overwrite=a.overwrite, jobs=a.jobs, body_model=a.body_model, height_override=a.height)
+    report = run_stage(
+        a.input, a.name, overwrite=a.overwrite, jobs=a.jobs, body_model=a.body_model, height_override=a.height
+    )
     if report.get("up_to_date"):
         print(up_to_date_line("retarget", a.name, "retargeted"))
         return 0
     s = report["summary"]
     print(f"retargeted {len(report['clips'])} clip(s), {len(report['failed'])} failed -> datasets/{a.name}/retargeted/")
-    for k in ("object_penetration_frac_1cm", "ground_penetration_frac_1cm", "float_frac_2cm", "foot_slide_frac_1cm_per_frame",
-              "contact_preservation_frac", "joint_limit_violation_frac", "frames_per_s"):  # fmt: skip
+    for k in (
+        "object_penetration_frac_1cm",
+        "ground_penetration_frac_1cm",
+        "float_frac_2cm",
+        "foot_slide_frac_1cm_per_frame",
+        "contact_preservation_frac",
+        "joint_limit_violation_frac",
+        "frames_per_s",
+    ):
         if k in s:
             print(f"  {k}: {s[k]:.4g}")
     return 1 if report["failed"] and not report["clips"] else 0
@@ -51,7 +69,11 @@ def _cmd_physicalize(a: argparse.Namespace) -> int:
         return 0
     s = report["summary"]
     n, kept = len(report["clips"]), s.get("episodes_written", 0)
-    where = f"datasets/{a.name}/physicalized/" if kept else f"nothing written (report: datasets/{a.name}/logs/physicalized/report.json)"
+    where = (
+        f"datasets/{a.name}/physicalized/"
+        if kept
+        else f"nothing written (report: datasets/{a.name}/logs/physicalized/report.json)"
+    )
     print(f"physicalized {n} clip(s): valid_frac {s.get('valid_frac', 0):.3g}, {kept} episode(s) -> {where}")
     for k in ("mpjpe_m", "root_pos_err_max_m", "penetration_max_m", "foot_slide_frac_1cm_per_frame", "realtime_factor"):
         if k in s:
@@ -66,7 +88,9 @@ def _cmd_physicalize_residual(a: argparse.Namespace) -> int:
 
     src = stage_dir(a.name, "retargeted")
     if not (src / "meta" / "info.json").is_file():
-        raise InputError(src, "meta/info.json", "no retargeted dataset here: run `lessmimic retarget --name NAME` first")
+        raise InputError(
+            src, "meta/info.json", "no retargeted dataset here: run `lessmimic retarget --name NAME` first"
+        )
     clips = episodes_to_robot_clips(src)
     if not 0 <= a.episode < len(clips):
         raise InputError(src, "--episode", f"episode {a.episode} out of range: the dataset has {len(clips)} episode(s)")
@@ -90,8 +114,10 @@ def _cmd_features(a: argparse.Namespace) -> int:
         print(f"features: {report['skipped']}")
         return 0
     s = report["summary"]
-    print(f"features of {s['clips']} clip(s), {s['frames']} frames ({s['frames_per_cpu_s']:.0f} frames per CPU-second, "
-          f"+ {s['fields_setup_cpu_s']:.1f} CPU-s loading the objects' fields) -> datasets/{a.name}/features/")
+    print(
+        f"features of {s['clips']} clip(s), {s['frames']} frames ({s['frames_per_cpu_s']:.0f} frames per CPU-second, "
+        f"+ {s['fields_setup_cpu_s']:.1f} CPU-s loading the objects' fields) -> datasets/{a.name}/features/"
+    )
     return 0
 
 
@@ -152,22 +178,47 @@ def _cmd_merge(a: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="lessmimic", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        prog="lessmimic", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     sub = ap.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("retarget", help="mocap -> G1 clips by mink IK (datasets/<NAME>/retargeted/); the ingested human clips go to datasets/<NAME>/human/")
+    p = sub.add_parser(
+        "retarget",
+        help="mocap -> G1 clips by mink IK (datasets/<NAME>/retargeted/); the ingested human clips go to "
+        "datasets/<NAME>/human/",
+    )
     _stage_args(p)
     p.add_argument("-j", "--jobs", type=int, default=1, help="worker processes over clips (default 1)")
-    p.add_argument("--height", type=float, default=None, help="subject height override in metres (outside 1.0-2.3 m needs it)")
+    p.add_argument(
+        "--height", type=float, default=None, help="subject height override in metres (outside 1.0-2.3 m needs it)"
+    )
     p.set_defaults(func=_cmd_retarget)
-    p = sub.add_parser("physicalize", help="retargeted clips -> simulated state-action data (datasets/<NAME>/physicalized/)")
+    p = sub.add_parser(
+        "physicalize", help="retargeted clips -> simulated state-action data (datasets/<NAME>/physicalized/)"
+    )
     _stage_args(p)
-    p.add_argument("--teacher", default="base", help="tracking teacher: base (whole-body QP controller) or base+residual:<checkpoint> "
-                   "(the QP's joint targets plus a learned residual trained by `lessmimic physicalize-residual`)")
-    p.add_argument("--profile", default="mjlab", help="actuator profile of the actions: mjlab or lessmimic_demo (default mjlab)")
-    p.add_argument("--keep-invalid", action="store_true", help="also write clips that fail validation (they are always in report.json)")
+    p.add_argument(
+        "--teacher",
+        default="base",
+        help="tracking teacher: base (whole-body QP controller) or base+residual:<checkpoint> "
+        "(the QP's joint targets plus a learned residual trained by `lessmimic physicalize-residual`)",
+    )
+    p.add_argument(
+        "--profile", default="mjlab", help="actuator profile of the actions: mjlab or lessmimic_demo (default mjlab)"
+    )
+    p.add_argument(
+        "--keep-invalid",
+        action="store_true",
+        help="also write clips that fail validation (they are always in report.json)",
+    )
     p.set_defaults(func=_cmd_physicalize)
-    p = sub.add_parser("physicalize-residual", help="train the physicalize teacher's learned residual (PPO, CPU) on one retargeted clip")
-    p.add_argument("--name", default="default", help="dataset name: trains on datasets/<NAME>/retargeted/ (default: default)")
+    p = sub.add_parser(
+        "physicalize-residual",
+        help="train the physicalize teacher's learned residual (PPO, CPU) on one retargeted clip",
+    )
+    p.add_argument(
+        "--name", default="default", help="dataset name: trains on datasets/<NAME>/retargeted/ (default: default)"
+    )
     p.add_argument("--episode", type=int, default=0, help="episode index of the clip to train on (default 0)")
     p.add_argument("--iterations", type=int, default=20, help="PPO iterations (default 20: smoke scale)")
     p.add_argument("--envs", type=int, default=8, help="parallel simulated environments (default 8)")
@@ -175,20 +226,35 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--profile", default="mjlab", help="actuator profile (default mjlab)")
     p.add_argument("--out", required=True, help="checkpoint path (.pt)")
     p.set_defaults(func=_cmd_physicalize_residual)
-    p = sub.add_parser("features", help="physicalized data -> distance-field interaction features (datasets/<NAME>/features/)")
-    p.add_argument("--name", default="default", help="dataset name: reads datasets/<NAME>/physicalized/, writes datasets/<NAME>/features/")
+    p = sub.add_parser(
+        "features", help="physicalized data -> distance-field interaction features (datasets/<NAME>/features/)"
+    )
+    p.add_argument(
+        "--name",
+        default="default",
+        help="dataset name: reads datasets/<NAME>/physicalized/, writes datasets/<NAME>/features/",
+    )
     p.add_argument("--overwrite", action="store_true", help="replace an existing output dataset")
-    p.add_argument("--links", default=None, help="comma-separated G1 body names for observation.df (default: pelvis, torso, hips, knees, "
-                   "ankles, shoulders, elbows, wrists)")
+    p.add_argument(
+        "--links",
+        default=None,
+        help="comma-separated G1 body names for observation.df (default: pelvis, torso, hips, knees, "
+        "ankles, shoulders, elbows, wrists)",
+    )
     p.set_defaults(func=_cmd_features)
     p = sub.add_parser("inspect", help="write an MCAP inspection log (Foxglove) for a clip file")
     p.add_argument("file")
     p.add_argument("--out", required=True, help="output .mcap path")
     p.add_argument("--robot", action="store_true", help="the file is a G1 motion (BeyondMimic .npz or GMR .pkl)")
-    p.add_argument("--object-mesh", default=None, help="with --robot: mesh of the object the motion file carries poses for")
+    p.add_argument(
+        "--object-mesh", default=None, help="with --robot: mesh of the object the motion file carries poses for"
+    )
     p.add_argument("--body-model", default=None)
     p.set_defaults(func=_cmd_inspect)
-    p = sub.add_parser("evaluate-retarget", help="retarget quality metrics of a G1 motion file (ours or a peer's) with our collision model")
+    p = sub.add_parser(
+        "evaluate-retarget",
+        help="retarget quality metrics of a G1 motion file (ours or a peer's) with our collision model",
+    )
     p.add_argument("file", help="BeyondMimic/OmniRetarget .npz or GMR .pkl")
     p.add_argument("--human", default=None, help="the human clip it came from (foot contacts, contact flags)")
     p.add_argument("--object-mesh", default=None, help="mesh of the object the file carries poses for")

@@ -73,7 +73,11 @@ def _lerp(t: np.ndarray, x: np.ndarray, nt: np.ndarray) -> np.ndarray:
 
 
 def _nearest(t: np.ndarray, x: np.ndarray, nt: np.ndarray) -> np.ndarray:
-    idx = np.clip(np.rint(nt * (len(t) - 1) / max(t[-1], 1e-12)).astype(int), 0, len(t) - 1) if len(t) > 1 else np.zeros(len(nt), int)
+    idx = (
+        np.clip(np.rint(nt * (len(t) - 1) / max(t[-1], 1e-12)).astype(int), 0, len(t) - 1)
+        if len(t) > 1
+        else np.zeros(len(nt), int)
+    )
     return x[idx]
 
 
@@ -99,7 +103,9 @@ class Skeleton:
             raise ValueError("skeleton joint names are not unique")
         for i, p in enumerate(self.parents):
             if not -1 <= p < i:
-                raise ValueError(f"skeleton joint {self.joint_names[i]!r} has parent {p}; parents must precede children")
+                raise ValueError(
+                    f"skeleton joint {self.joint_names[i]!r} has parent {p}; parents must precede children"
+                )
 
     def index(self, name: str) -> int:
         return self.joint_names.index(name)
@@ -116,7 +122,9 @@ class ObjectTrack:
     contact: np.ndarray | None = None
     mass: float | None = None
     source: str = ""
-    friction: float | None = None  # sliding friction coefficient against anything it touches (the object's geoms win MuJoCo's mixing)
+    friction: float | None = (
+        None  # sliding friction coefficient against anything it touches (the object's geoms win MuJoCo's mixing)
+    )
 
     def __post_init__(self):
         pose = check_array(self.pose, (None, 7), f"object {self.name} pose", self.source)
@@ -125,7 +133,9 @@ class ObjectTrack:
         if self.contact is not None:
             c = np.asarray(self.contact).astype(bool).reshape(-1)
             if c.shape[0] != pose.shape[0]:
-                raise InputError(self.source, f"object {self.name} contact", f"has {c.shape[0]} frames, pose has {pose.shape[0]}")
+                raise InputError(
+                    self.source, f"object {self.name} contact", f"has {c.shape[0]} frames, pose has {pose.shape[0]}"
+                )
             object.__setattr__(self, "contact", c)
         for key in ("mass", "friction"):
             v = getattr(self, key)
@@ -141,7 +151,7 @@ class ObjectTrack:
         default = ObjectPhysics()
         return ObjectPhysics(mass=self.mass or default.mass, friction=self.friction or default.friction)
 
-    def resampled(self, fps: float, new_fps: float) -> "ObjectTrack":
+    def resampled(self, fps: float, new_fps: float) -> ObjectTrack:
         t, nt = _resample_times(self.frames, fps, new_fps)
         contact = None if self.contact is None else _nearest(t, self.contact, nt)
         return replace(self, pose=_resample_pose(t, self.pose, nt), contact=contact)
@@ -197,13 +207,17 @@ class HumanClip:
     def duration(self) -> float:
         return (self.frames - 1) / self.fps
 
-    def resampled(self, new_fps: float) -> "HumanClip":
+    def resampled(self, new_fps: float) -> HumanClip:
         """The clip at ``new_fps``: positions linearly interpolated, orientations slerped, flags nearest."""
         new_fps = _check_fps(new_fps, self.source)
         t, nt = _resample_times(self.frames, self.fps, new_fps)
         quat = None
         if self.joint_quat is not None:
-            quat = np.stack([slerp_wxyz(t, self.joint_quat[:, j], nt) for j in range(self.joint_quat.shape[1])], axis=1) if len(t) > 1 else np.repeat(self.joint_quat, len(nt), 0)
+            quat = (
+                np.stack([slerp_wxyz(t, self.joint_quat[:, j], nt) for j in range(self.joint_quat.shape[1])], axis=1)
+                if len(t) > 1
+                else np.repeat(self.joint_quat, len(nt), 0)
+            )
         pos = _lerp(t, self.joint_pos, nt) if len(t) > 1 else np.repeat(self.joint_pos, len(nt), 0)
         contacts = None if self.contacts is None else _nearest(t, self.contacts, nt)
         objects = tuple(o.resampled(self.fps, new_fps) for o in self.objects)
@@ -249,7 +263,7 @@ class RobotClip:
     def frames(self) -> int:
         return self.qpos.shape[0]
 
-    def resampled(self, new_fps: float) -> "RobotClip":
+    def resampled(self, new_fps: float) -> RobotClip:
         """Root position and joints linearly interpolated, root orientation slerped, labels nearest."""
         new_fps = _check_fps(new_fps, self.source)
         t, nt = _resample_times(self.frames, self.fps, new_fps)
@@ -291,12 +305,25 @@ class PhysicalizedClip:
 
     def __post_init__(self):
         src, T = self.robot.source, self.robot.frames
-        for name, dim in (("qvel", QVEL_DIM), ("action", NUM_JOINTS), ("torque", NUM_JOINTS), ("foot_force", 2), ("reference_qpos", QPOS_DIM)):
+        for name, dim in (
+            ("qvel", QVEL_DIM),
+            ("action", NUM_JOINTS),
+            ("torque", NUM_JOINTS),
+            ("foot_force", 2),
+            ("reference_qpos", QPOS_DIM),
+        ):
             object.__setattr__(self, name, check_array(getattr(self, name), (None, dim), name, src, frames=T))
         vel = tuple(self.object_vel)
         if len(vel) != len(self.robot.objects):
             raise InputError(src, "object_vel", f"{len(vel)} velocity tracks for {len(self.robot.objects)} objects")
-        object.__setattr__(self, "object_vel", tuple(check_array(v, (None, 6), f"object {o.name} vel", src, frames=T) for v, o in zip(vel, self.robot.objects)))
+        object.__setattr__(
+            self,
+            "object_vel",
+            tuple(
+                check_array(v, (None, 6), f"object {o.name} vel", src, frames=T)
+                for v, o in zip(vel, self.robot.objects)
+            ),
+        )
 
     @property
     def frames(self) -> int:

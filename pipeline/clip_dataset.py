@@ -55,8 +55,15 @@ DEFAULT_TASK = "humanoid whole-body motion"
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     aw, ax, ay, az = np.moveaxis(a, -1, 0)
     bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)  # fmt: skip
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
 
 
 def quat_velocity(q1: np.ndarray, q2: np.ndarray, dt: float) -> np.ndarray:
@@ -78,8 +85,14 @@ def quat_velocity(q1: np.ndarray, q2: np.ndarray, dt: float) -> np.ndarray:
 
 def qpos_difference(q1: np.ndarray, q2: np.ndarray, dt: float) -> np.ndarray:
     """``mj_differentiatePos`` for the G1 layout: ``(..., 36), (..., 36) -> (..., 35)``."""
-    return np.concatenate([(q2[..., :3] - q1[..., :3]) / dt, quat_velocity(q1[..., 3:7], q2[..., 3:7], dt),
-                           (q2[..., 7:] - q1[..., 7:]) / dt], axis=-1)  # fmt: skip
+    return np.concatenate(
+        [
+            (q2[..., :3] - q1[..., :3]) / dt,
+            quat_velocity(q1[..., 3:7], q2[..., 3:7], dt),
+            (q2[..., 7:] - q1[..., 7:]) / dt,
+        ],
+        axis=-1,
+    )
 
 
 def qvel_from_qpos(qpos: np.ndarray, fps: float) -> np.ndarray:
@@ -104,7 +117,9 @@ def clips_fps(clips: Sequence[RobotClip | HumanClip]) -> int:
         if abs(c.fps - fps) > 1e-9:
             raise InputError(c.source, "fps", f"{c.fps} differs from {clips[0].source} ({fps}); resample first")
     if abs(fps - round(fps)) > 1e-6:
-        raise InputError(clips[0].source, "fps", f"{fps} is not an integer; LeRobot needs an integer fps: resample first")
+        raise InputError(
+            clips[0].source, "fps", f"{fps} is not an integer; LeRobot needs an integer fps: resample first"
+        )
     return int(round(fps))
 
 
@@ -112,7 +127,11 @@ def _common(clips, attr: str, what: str):
     ref = getattr(clips[0], attr)
     for c in clips[1:]:
         if getattr(c, attr) != ref:
-            raise InputError(c.source, what, f"{getattr(c, attr)!r} differs from {clips[0].source} ({ref!r}); one dataset has one feature spec")
+            raise InputError(
+                c.source,
+                what,
+                f"{getattr(c, attr)!r} differs from {clips[0].source} ({ref!r}); one dataset has one feature spec",
+            )
     return ref
 
 
@@ -120,7 +139,9 @@ def _object_features(clips) -> tuple[list[Feature], tuple[str, ...], set[str]]:
     for c in clips:
         names = tuple(o.name for o in c.objects)
         if names != tuple(o.name for o in clips[0].objects):
-            raise InputError(c.source, "objects", f"{list(names)} differ from {clips[0].source}; one dataset has one feature spec")
+            raise InputError(
+                c.source, "objects", f"{list(names)} differ from {clips[0].source}; one dataset has one feature spec"
+            )
         for n in names:
             if not n or "/" in n:
                 raise InputError(c.source, "objects", f"object name {n!r} is empty or contains '/'")
@@ -128,7 +149,9 @@ def _object_features(clips) -> tuple[list[Feature], tuple[str, ...], set[str]]:
     with_contact = {o.name for c in clips for o in c.objects if o.contact is not None}
     feats = []
     for n in names:
-        feats.append(Feature(f"object.{n}.pose", "float32", POSE_NAMES, f"pose of object {n!r}: position, quaternion wxyz", "m"))
+        feats.append(
+            Feature(f"object.{n}.pose", "float32", POSE_NAMES, f"pose of object {n!r}: position, quaternion wxyz", "m")
+        )
         if n in with_contact:
             feats.append(Feature(f"object.{n}.contact", "bool", ("contact",), f"object {n!r} is in contact"))
     return feats, names, with_contact
@@ -140,8 +163,16 @@ def _object_data(clip, with_contact: set[str]) -> tuple[dict, list[dict]]:
         data[f"object.{o.name}.pose"] = o.pose
         if o.name in with_contact:
             data[f"object.{o.name}.contact"] = np.zeros(o.frames, bool) if o.contact is None else o.contact
-        meta.append({"name": o.name, "geometry": geometry_to_dict(o.geometry), "mass": o.mass, "friction": o.friction, "source": o.source,
-                     "has_contact": o.contact is not None})  # fmt: skip
+        meta.append(
+            {
+                "name": o.name,
+                "geometry": geometry_to_dict(o.geometry),
+                "mass": o.mass,
+                "friction": o.friction,
+                "source": o.source,
+                "has_contact": o.contact is not None,
+            }
+        )
     return data, meta
 
 
@@ -155,7 +186,9 @@ def _objects_back(ep: Episode, source: str) -> tuple[ObjectTrack, ...]:
             geometry = geometry_from_dict(m["geometry"])
         except (ValueError, KeyError, TypeError) as exc:  # e.g. a zero scale written by another tool
             raise InputError(source, f"object {m['name']} geometry", str(exc)) from None
-        out.append(ObjectTrack(m["name"], geometry, pose, contact, m.get("mass"), m.get("source", source), m.get("friction")))
+        out.append(
+            ObjectTrack(m["name"], geometry, pose, contact, m.get("mass"), m.get("source", source), m.get("friction"))
+        )
     return tuple(out)
 
 
@@ -171,15 +204,30 @@ _SOURCE_FRAME = Feature("source_frame", "int64", ("source_frame",), "frame index
 # --- robot clips ---------------------------------------------------------------------------------
 
 
-def robot_clips_to_episodes(clips: Sequence[RobotClip], *, default_task: str = DEFAULT_TASK) -> tuple[list[Feature], list[Episode]]:
+def robot_clips_to_episodes(
+    clips: Sequence[RobotClip], *, default_task: str = DEFAULT_TASK
+) -> tuple[list[Feature], list[Episode]]:
     """The feature spec and one episode per clip (write them with ``write_dataset(..., fps=clips_fps(clips))``)."""
     fps = clips_fps(clips)
     links = _common(clips, "contact_links", "contact_links")
     obj_feats, _, with_contact = _object_features(clips)
     features = [
-        Feature("observation.state", "float32", QPOS_NAMES, "G1 qpos: root position, root quaternion wxyz (world), joint angles", "m, rad"),
-        Feature("observation.qvel", "float32", QVEL_NAMES, "G1 qvel by finite differences: root linear velocity (world), root angular velocity (body), joint velocities", "m/s, rad/s"),
-    ]  # fmt: skip
+        Feature(
+            "observation.state",
+            "float32",
+            QPOS_NAMES,
+            "G1 qpos: root position, root quaternion wxyz (world), joint angles",
+            "m, rad",
+        ),
+        Feature(
+            "observation.qvel",
+            "float32",
+            QVEL_NAMES,
+            "G1 qvel by finite differences: root linear velocity (world), root angular velocity (body), joint "
+            "velocities",
+            "m/s, rad/s",
+        ),
+    ]
     if links:
         features.append(Feature("contact", "bool", links, "link touches an object"))
     features += obj_feats + [_SOURCE_FRAME]
@@ -192,9 +240,18 @@ def robot_clips_to_episodes(clips: Sequence[RobotClip], *, default_task: str = D
         data.update(obj_data)
         ratio = float(c.provenance.get("source_fps", fps)) / fps
         data["source_frame"] = _source_frames(c.frames, c.provenance.get("source_frame_start"), ratio)
-        meta = {"kind": "robot", "source": c.source, "fps": c.fps, "method": c.method, "clip_task": c.task,
-                "synthetic": bool(c.provenance.get("synthetic", False)), "provenance": c.provenance,
-                "contact_links": list(c.contact_links), "has_contacts": c.contacts is not None, "objects": obj_meta}  # fmt: skip
+        meta = {
+            "kind": "robot",
+            "source": c.source,
+            "fps": c.fps,
+            "method": c.method,
+            "clip_task": c.task,
+            "synthetic": bool(c.provenance.get("synthetic", False)),
+            "provenance": c.provenance,
+            "contact_links": list(c.contact_links),
+            "has_contacts": c.contacts is not None,
+            "objects": obj_meta,
+        }
         episodes.append(Episode(c.task or default_task, data, meta))
     return features, episodes
 
@@ -206,10 +263,16 @@ def _robot_clip(ep: Episode, root, e: int, fps: float) -> RobotClip:
     links = tuple(m.get("contact_links", ()))
     contacts = ep.data["contact"].astype(bool) if links and m.get("has_contacts") else None
     return RobotClip(
-        qpos=ep.data["observation.state"].astype(np.float64), fps=float(m.get("fps", fps)), source=m["source"],
-        objects=_objects_back(ep, m["source"]), contact_links=links, contacts=contacts, method=m.get("method", ""),
-        provenance=m.get("provenance", {}), task=m.get("clip_task", ep.task),
-    )  # fmt: skip
+        qpos=ep.data["observation.state"].astype(np.float64),
+        fps=float(m.get("fps", fps)),
+        source=m["source"],
+        objects=_objects_back(ep, m["source"]),
+        contact_links=links,
+        contacts=contacts,
+        method=m.get("method", ""),
+        provenance=m.get("provenance", {}),
+        task=m.get("clip_task", ep.task),
+    )
 
 
 def episodes_to_robot_clips(root: str | Path) -> list[RobotClip]:
@@ -227,21 +290,44 @@ _VEL_NAMES = ("vx", "vy", "vz", "wx", "wy", "wz")
 
 def physicalized_clips_to_episodes(clips: Sequence[PhysicalizedClip]) -> tuple[list[Feature], list[Episode]]:
     """The feature spec and one episode per simulated clip (the robot features of :func:`robot_clips_to_episodes`
-    with ``observation.qvel`` from the simulation, plus the simulation's actions, torques, forces and object velocities)."""
+    with ``observation.qvel`` from the simulation, plus the simulation's actions, torques, forces and object
+    velocities)."""
     features, episodes = robot_clips_to_episodes([c.robot for c in clips])
-    sim_qvel = "G1 qvel from the simulation: root linear velocity (world), root angular velocity (body), joint velocities"
+    sim_qvel = (
+        "G1 qvel from the simulation: root linear velocity (world), root angular velocity (body), joint velocities"
+    )
     features = [replace(f, description=sim_qvel) if f.name == "observation.qvel" else f for f in features]
     features += [
         Feature("action", "float32", G1_JOINT_NAMES, "joint position targets held for the next 20 ms", "rad"),
-        Feature("observation.torque", "float32", G1_JOINT_NAMES, "applied actuator torques (mean over the hold)", "N m"),
-        Feature("observation.foot_force", "float32", ("left", "right"), "vertical floor contact force on each foot", "N"),
+        Feature(
+            "observation.torque", "float32", G1_JOINT_NAMES, "applied actuator torques (mean over the hold)", "N m"
+        ),
+        Feature(
+            "observation.foot_force", "float32", ("left", "right"), "vertical floor contact force on each foot", "N"
+        ),
         Feature("reference.state", "float32", QPOS_NAMES, "retargeted qpos tracked at this frame", "m, rad"),
-    ]  # fmt: skip
+    ]
     names = [o.name for o in clips[0].robot.objects]
-    features += [Feature(f"object.{n}.vel", "float32", _VEL_NAMES, f"object {n!r} velocity (linear world, angular body)", "m/s, rad/s") for n in names]
+    features += [
+        Feature(
+            f"object.{n}.vel",
+            "float32",
+            _VEL_NAMES,
+            f"object {n!r} velocity (linear world, angular body)",
+            "m/s, rad/s",
+        )
+        for n in names
+    ]
     for ep, c in zip(episodes, clips):
-        ep.data.update({"observation.qvel": c.qvel, "action": c.action, "observation.torque": c.torque, "observation.foot_force": c.foot_force,
-                        "reference.state": c.reference_qpos})  # fmt: skip
+        ep.data.update(
+            {
+                "observation.qvel": c.qvel,
+                "action": c.action,
+                "observation.torque": c.torque,
+                "observation.foot_force": c.foot_force,
+                "reference.state": c.reference_qpos,
+            }
+        )
         ep.data.update({f"object.{n}.vel": v for n, v in zip(names, c.object_vel)})
         ep.meta.update({"stage": "physicalized", "validation": c.validation})
     return features, episodes
@@ -254,24 +340,37 @@ def episodes_to_physicalized_clips(root: str | Path) -> list[PhysicalizedClip]:
 
     info = read_info(root)
     names = info["features"]
-    missing = [k for k in ("action", "observation.torque", "observation.foot_force", "reference.state") if k not in names]
+    missing = [
+        k for k in ("action", "observation.torque", "observation.foot_force", "reference.state") if k not in names
+    ]
     if missing:
-        raise InputError(root, "features", f"missing {missing}: not a physicalized dataset (run `lessmimic physicalize` first)")
+        raise InputError(
+            root, "features", f"missing {missing}: not a physicalized dataset (run `lessmimic physicalize` first)"
+        )
     clips = []
     for e, ep in enumerate(iter_episodes(root)):
         robot, d = _robot_clip(ep, root, e, info["fps"]), ep.data
-        clips.append(PhysicalizedClip(
-            robot=robot, qvel=d["observation.qvel"], object_vel=tuple(d[f"object.{o.name}.vel"] for o in robot.objects),
-            action=d["action"], torque=d["observation.torque"], foot_force=d["observation.foot_force"],
-            reference_qpos=d["reference.state"], validation=ep.meta.get("validation", {}),
-        ))  # fmt: skip
+        clips.append(
+            PhysicalizedClip(
+                robot=robot,
+                qvel=d["observation.qvel"],
+                object_vel=tuple(d[f"object.{o.name}.vel"] for o in robot.objects),
+                action=d["action"],
+                torque=d["observation.torque"],
+                foot_force=d["observation.foot_force"],
+                reference_qpos=d["reference.state"],
+                validation=ep.meta.get("validation", {}),
+            )
+        )
     return clips
 
 
 # --- human clips ---------------------------------------------------------------------------------
 
 
-def human_clips_to_episodes(clips: Sequence[HumanClip], *, default_task: str = DEFAULT_TASK) -> tuple[list[Feature], list[Episode]]:
+def human_clips_to_episodes(
+    clips: Sequence[HumanClip], *, default_task: str = DEFAULT_TASK
+) -> tuple[list[Feature], list[Episode]]:
     """The feature spec and one episode per human clip (all clips share one skeleton)."""
     clips_fps(clips)
     skel: Skeleton = _common(clips, "skeleton", "skeleton")
@@ -282,11 +381,28 @@ def human_clips_to_episodes(clips: Sequence[HumanClip], *, default_task: str = D
     has_contacts = any(c.contacts is not None for c in clips)
     obj_feats, _, with_contact = _object_features(clips)
     J = skel.joint_names
-    features = [Feature("observation.joint_pos", "float32", tuple(f"{j}.{a}" for j in J for a in "xyz"), "global joint positions (world, z-up)", "m")]
+    features = [
+        Feature(
+            "observation.joint_pos",
+            "float32",
+            tuple(f"{j}.{a}" for j in J for a in "xyz"),
+            "global joint positions (world, z-up)",
+            "m",
+        )
+    ]
     if quat.pop():
-        features.append(Feature("observation.joint_quat", "float32", tuple(f"{j}.q{a}" for j in J for a in "wxyz"), "global joint orientations, quaternion wxyz (world)"))
+        features.append(
+            Feature(
+                "observation.joint_quat",
+                "float32",
+                tuple(f"{j}.q{a}" for j in J for a in "wxyz"),
+                "global joint orientations, quaternion wxyz (world)",
+            )
+        )
     if has_contacts:
-        features.append(Feature("contact", "bool", J, "joint in contact with an object (foot-ground contact is derived downstream)"))
+        features.append(
+            Feature("contact", "bool", J, "joint in contact with an object (foot-ground contact is derived downstream)")
+        )
     features += obj_feats + [_SOURCE_FRAME]
     episodes = []
     for c in clips:
@@ -299,9 +415,17 @@ def human_clips_to_episodes(clips: Sequence[HumanClip], *, default_task: str = D
         obj_data, obj_meta = _object_data(c, with_contact)
         data.update(obj_data)
         data["source_frame"] = _source_frames(T, 0)
-        meta = {"kind": "human", "source": c.source, "fps": c.fps, "clip_task": c.task, "synthetic": c.synthetic,
-                "subject_height": c.subject_height, "skeleton": {"joint_names": list(J), "parents": list(skel.parents)},
-                "has_contacts": c.contacts is not None, "objects": obj_meta}  # fmt: skip
+        meta = {
+            "kind": "human",
+            "source": c.source,
+            "fps": c.fps,
+            "clip_task": c.task,
+            "synthetic": c.synthetic,
+            "subject_height": c.subject_height,
+            "skeleton": {"joint_names": list(J), "parents": list(skel.parents)},
+            "has_contacts": c.contacts is not None,
+            "objects": obj_meta,
+        }
         episodes.append(Episode(c.task or default_task, data, meta))
     return features, episodes
 
@@ -315,15 +439,25 @@ def episodes_to_human_clips(root: str | Path) -> list[HumanClip]:
     for e, ep in enumerate(iter_episodes(root)):
         m = ep.meta
         if m.get("kind") != "human":
-            raise InputError(root, f"episode {e}", "was not written from a human clip (sidecar meta kind is not 'human')")
+            raise InputError(
+                root, f"episode {e}", "was not written from a human clip (sidecar meta kind is not 'human')"
+            )
         skel = Skeleton(tuple(m["skeleton"]["joint_names"]), tuple(m["skeleton"]["parents"]))
         T, J = ep.data["observation.joint_pos"].shape[0], len(skel.joint_names)
         quat = ep.data.get("observation.joint_quat")
         contacts = ep.data["contact"].astype(bool) if m.get("has_contacts") else None
-        clips.append(HumanClip(
-            skeleton=skel, joint_pos=ep.data["observation.joint_pos"].astype(np.float64).reshape(T, J, 3),
-            fps=float(m.get("fps", fps)), source=m["source"], subject_height=m.get("subject_height"),
-            joint_quat=None if quat is None else quat.astype(np.float64).reshape(T, J, 4), contacts=contacts,
-            objects=_objects_back(ep, m["source"]), task=m.get("clip_task", ep.task), synthetic=bool(m.get("synthetic", False)),
-        ))  # fmt: skip
+        clips.append(
+            HumanClip(
+                skeleton=skel,
+                joint_pos=ep.data["observation.joint_pos"].astype(np.float64).reshape(T, J, 3),
+                fps=float(m.get("fps", fps)),
+                source=m["source"],
+                subject_height=m.get("subject_height"),
+                joint_quat=None if quat is None else quat.astype(np.float64).reshape(T, J, 4),
+                contacts=contacts,
+                objects=_objects_back(ep, m["source"]),
+                task=m.get("clip_task", ep.task),
+                synthetic=bool(m.get("synthetic", False)),
+            )
+        )
     return clips

@@ -39,7 +39,13 @@ CODEBASE_VERSION = "v3.0"  # lerobot.datasets.lerobot_dataset.CODEBASE_VERSION (
 DTYPES = ("float32", "int64", "bool")
 QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)  # lerobot.datasets.compute_stats.DEFAULT_QUANTILES
 #: LeRobot's own per-frame columns, in its order (lerobot.datasets.utils.DEFAULT_FEATURES).
-INDEX_COLUMNS = {"timestamp": "float32", "frame_index": "int64", "episode_index": "int64", "index": "int64", "task_index": "int64"}
+INDEX_COLUMNS = {
+    "timestamp": "float32",
+    "frame_index": "int64",
+    "episode_index": "int64",
+    "index": "int64",
+    "task_index": "int64",
+}
 DATA_PATH = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
 EPISODES_PATH = "meta/episodes/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
 SIDECAR_EPISODES = "meta/lessmimic_episodes.jsonl"
@@ -88,8 +94,10 @@ def validate_name(name: str, what: str = "dataset name") -> str:
     """A dataset / repo name: letters, digits, ``.``, ``_``, ``-``; no path separators, no ``..``."""
     if not isinstance(name, str) or not _NAME_RE.match(name) or ".." in name or name.endswith("."):
         raise InputError(
-            name, what, "must be 1-96 letters, digits, '.', '_' or '-', start with a letter or digit, "
-            "and contain no path separator or '..'"
+            name,
+            what,
+            "must be 1-96 letters, digits, '.', '_' or '-', start with a letter or digit, "
+            "and contain no path separator or '..'",
         )
     return name
 
@@ -176,13 +184,19 @@ def _json_default(o):
 
 
 _LAZY = {
-    "write_dataset": "pipeline.dataset_write", "merge_datasets": "pipeline.dataset_write",
-    "WindowDataset": "pipeline.dataset_read", "iter_episodes": "pipeline.dataset_read",
-    "read_columns": "pipeline.dataset_read", "read_features": "pipeline.dataset_read",
-    "read_info": "pipeline.dataset_read", "read_sidecar": "pipeline.dataset_read",
-    "read_card": "pipeline.dataset_read", "read_episode_meta": "pipeline.dataset_read",
-    "episode_ranges": "pipeline.dataset_read", "DatasetCard": "pipeline.dataset_card",
-}  # fmt: skip
+    "write_dataset": "pipeline.dataset_write",
+    "merge_datasets": "pipeline.dataset_write",
+    "WindowDataset": "pipeline.dataset_read",
+    "iter_episodes": "pipeline.dataset_read",
+    "read_columns": "pipeline.dataset_read",
+    "read_features": "pipeline.dataset_read",
+    "read_info": "pipeline.dataset_read",
+    "read_sidecar": "pipeline.dataset_read",
+    "read_card": "pipeline.dataset_read",
+    "read_episode_meta": "pipeline.dataset_read",
+    "episode_ranges": "pipeline.dataset_read",
+    "DatasetCard": "pipeline.dataset_card",
+}
 
 
 def __getattr__(name: str):

@@ -47,7 +47,7 @@ class DatasetCard:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict) -> "DatasetCard":
+    def from_dict(cls, d: dict) -> DatasetCard:
         known = {k: v for k, v in d.items() if k in cls.__dataclass_fields__}
         return cls(**known)
 
@@ -64,11 +64,21 @@ def _cell(s: str) -> str:
     return (s or "").replace("|", "\\|").replace("\n", " ")
 
 
-def render_card(card: DatasetCard, repo_id: str, fps: int, features: Sequence[Feature], episodes: int, frames: int) -> str:
+def render_card(
+    card: DatasetCard, repo_id: str, fps: int, features: Sequence[Feature], episodes: int, frames: int
+) -> str:
     """Markdown with YAML front matter for ``README.md``."""
     lines = ["---", f"license: {_yaml_str(card.license)}", f"pretty_name: {_yaml_str(card.title)}", "tags:"]
     lines += [f"- {_yaml_str(t)}" for t in card.all_tags()]
-    lines += ["task_categories:", "- robotics", "configs:", "- config_name: default", "  data_files: data/*/*.parquet", "---", ""]
+    lines += [
+        "task_categories:",
+        "- robotics",
+        "configs:",
+        "- config_name: default",
+        "  data_files: data/*/*.parquet",
+        "---",
+        "",
+    ]
     lines += [f"# {card.title}", ""]
     if card.description:
         lines += [card.description.strip(), ""]
@@ -92,8 +102,8 @@ def render_card(card: DatasetCard, repo_id: str, fps: int, features: Sequence[Fe
     lines += ["## Features", "", "| feature | dtype | size | unit | frame | meaning |", "|---|---|---|---|---|---|"]
     for f in features:
         lines.append(
-            f"| `{f.name}` | {f.dtype} | {f.shape[0]} | {_cell(f.unit)} | {_cell(card.feature_frames.get(f.name, ''))} | "
-            f"{_cell(f.description)} |"
+            f"| `{f.name}` | {f.dtype} | {f.shape[0]} | {_cell(f.unit)} | "
+            f"{_cell(card.feature_frames.get(f.name, ''))} | {_cell(f.description)} |"
         )
     lines.append("")
     lines.append("Element names of every feature are listed in `meta/info.json`.")

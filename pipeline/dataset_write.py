@@ -73,7 +73,13 @@ def episode_stats(columns: Mapping[str, np.ndarray]) -> dict[str, dict[str, np.n
     for name, a in columns.items():
         sl = slice(k, k + a.shape[1])
         k += a.shape[1]
-        s = {"min": mn[sl].astype(a.dtype), "max": mx[sl].astype(a.dtype), "mean": mean[sl], "std": std[sl], "count": count}
+        s = {
+            "min": mn[sl].astype(a.dtype),
+            "max": mx[sl].astype(a.dtype),
+            "mean": mean[sl],
+            "std": std[sl],
+            "count": count,
+        }
         s.update({_qkey(p): q[i, sl] for i, p in enumerate(QUANTILES)})
         out[name] = s
     return out
@@ -90,8 +96,13 @@ def aggregate_stats(per_episode: Sequence[Mapping[str, np.ndarray]]) -> dict[str
     means = np.stack([s["mean"] for s in per_episode])
     mean = (means * n).sum(axis=0) / total
     var = ((np.stack([s["std"] for s in per_episode]) ** 2 + (means - mean) ** 2) * n).sum(axis=0) / total
-    out = {"min": np.min([s["min"] for s in per_episode], axis=0), "max": np.max([s["max"] for s in per_episode], axis=0),
-           "mean": mean, "std": np.sqrt(var), "count": np.array([int(total)], dtype=np.int64)}  # fmt: skip
+    out = {
+        "min": np.min([s["min"] for s in per_episode], axis=0),
+        "max": np.max([s["max"] for s in per_episode], axis=0),
+        "mean": mean,
+        "std": np.sqrt(var),
+        "count": np.array([int(total)], dtype=np.int64),
+    }
     for p in QUANTILES:
         k = _qkey(p)
         out[k] = (np.stack([s[k] for s in per_episode]) * n).sum(axis=0) / total
@@ -122,9 +133,15 @@ def _data_schema(features: Sequence[Feature]) -> pa.Schema:
 
 
 def _episodes_table(rows: list[dict], features: Sequence[Feature]) -> pa.Table:
-    fixed = [("episode_index", pa.int64()), ("tasks", pa.list_(pa.string())), ("length", pa.int64()),
-             ("data/chunk_index", pa.int64()), ("data/file_index", pa.int64()),
-             ("dataset_from_index", pa.int64()), ("dataset_to_index", pa.int64())]  # fmt: skip
+    fixed = [
+        ("episode_index", pa.int64()),
+        ("tasks", pa.list_(pa.string())),
+        ("length", pa.int64()),
+        ("data/chunk_index", pa.int64()),
+        ("data/file_index", pa.int64()),
+        ("dataset_from_index", pa.int64()),
+        ("dataset_to_index", pa.int64()),
+    ]
     fields = [pa.field(k, t) for k, t in fixed]
     for name, dtype, _ in _column_specs(features):
         value_type = pa.float64() if dtype == "float32" else pa.from_numpy_dtype(np.dtype(dtype))  # as LeRobot
@@ -163,7 +180,9 @@ class _DataFiles:
         """Queue one episode's frames; returns the (chunk, file) it lands in."""
         if self.bytes and self.bytes + batch.nbytes > self.max_bytes:
             self.close()
-            self.chunk, self.file = (self.chunk + 1, 0) if self.file + 1 >= self.chunks_size else (self.chunk, self.file + 1)
+            self.chunk, self.file = (
+                (self.chunk + 1, 0) if self.file + 1 >= self.chunks_size else (self.chunk, self.file + 1)
+            )
             self.bytes = 0
         self.pending.append(batch)
         self.pending_rows += batch.num_rows
@@ -179,7 +198,9 @@ class _DataFiles:
             path = self.root / DATA_PATH.format(chunk_index=self.chunk, file_index=self.file)
             path.parent.mkdir(parents=True, exist_ok=True)
             # Dictionary encoding only pays off (and is only cheap) on the low-cardinality index columns.
-            self.writer = pq.ParquetWriter(path, self.schema, compression="snappy", use_dictionary=["episode_index", "task_index"])
+            self.writer = pq.ParquetWriter(
+                path, self.schema, compression="snappy", use_dictionary=["episode_index", "task_index"]
+            )
         self.writer.write_table(pa.Table.from_batches(self.pending, self.schema))
         self.pending, self.pending_rows = [], 0
 
@@ -197,7 +218,11 @@ def check_target(root: Path, overwrite: bool) -> None:
     """``root`` may be (re)written: a valid folder name, and absent unless ``overwrite``."""
     validate_name(root.name, "dataset folder name")
     if root.exists() and not overwrite:
-        raise InputError(root, "dataset", "already exists; pass --overwrite (OVERWRITE=1 with make, overwrite=True in Python) to replace it")
+        raise InputError(
+            root,
+            "dataset",
+            "already exists; pass --overwrite (OVERWRITE=1 with make, overwrite=True in Python) to replace it",
+        )
     if root.exists() and not root.is_dir():
         raise InputError(root, "dataset", "exists and is not a folder")
 
@@ -287,24 +312,39 @@ def _write_into(root, repo_id, fps, features, episodes, robot_type, card, data_f
             T = next(iter(data.values())).shape[0]
             task_idx = tasks.setdefault(ep.task, len(tasks))
             frame = np.arange(T, dtype=np.int64)
-            data.update({
-                "timestamp": (frame / fps).astype(np.float32)[:, None],
-                "frame_index": frame[:, None],
-                "episode_index": np.full((T, 1), ep_idx, dtype=np.int64),
-                "index": (frame + total)[:, None],
-                "task_index": np.full((T, 1), task_idx, dtype=np.int64),
-            })  # fmt: skip
-            batch = pa.RecordBatch.from_arrays([_arrow_array(data[n], d) for n, _, d in _column_specs(features)], schema=schema)
+            data.update(
+                {
+                    "timestamp": (frame / fps).astype(np.float32)[:, None],
+                    "frame_index": frame[:, None],
+                    "episode_index": np.full((T, 1), ep_idx, dtype=np.int64),
+                    "index": (frame + total)[:, None],
+                    "task_index": np.full((T, 1), task_idx, dtype=np.int64),
+                }
+            )
+            batch = pa.RecordBatch.from_arrays(
+                [_arrow_array(data[n], d) for n, _, d in _column_specs(features)], schema=schema
+            )
             chunk, file = files.add(batch)
             stats = episode_stats({name: data[name] for name, _, _ in _column_specs(features)})
             all_stats.append(stats)
-            row = {"episode_index": ep_idx, "tasks": [ep.task], "length": T, "data/chunk_index": chunk,
-                   "data/file_index": file, "dataset_from_index": total, "dataset_to_index": total + T,
-                   "meta/episodes/chunk_index": 0, "meta/episodes/file_index": 0}  # fmt: skip
+            row = {
+                "episode_index": ep_idx,
+                "tasks": [ep.task],
+                "length": T,
+                "data/chunk_index": chunk,
+                "data/file_index": file,
+                "dataset_from_index": total,
+                "dataset_to_index": total + T,
+                "meta/episodes/chunk_index": 0,
+                "meta/episodes/file_index": 0,
+            }
             for name, s in stats.items():
                 row.update({f"stats/{name}/{k}": v.tolist() for k, v in s.items()})
             rows.append(row)
-            sidecar.write(json.dumps({"episode_index": ep_idx, "task": ep.task, "length": T, **ep.meta}, default=_json_default) + "\n")
+            sidecar.write(
+                json.dumps({"episode_index": ep_idx, "task": ep.task, "length": T, **ep.meta}, default=_json_default)
+                + "\n"
+            )
             total += T
     finally:
         files.close()
@@ -317,13 +357,22 @@ def _write_into(root, repo_id, fps, features, episodes, robot_type, card, data_f
     _write_tasks(root / "meta/tasks.parquet", tasks)
     names = [n for n, _, _ in _column_specs(features)]
     _write_json(root / "meta/stats.json", {n: aggregate_stats([s[n] for s in all_stats]) for n in names})
-    _write_json(root / "meta/info.json", _info(fps, features, robot_type, len(rows), total, len(tasks), data_file_size_mb, chunks_size))
-    _write_json(root / SIDECAR_DATASET, {
-        "format": 1, "repo_id": repo_id,
-        "features": {f.name: {"description": f.description, "unit": f.unit} for f in features},
-        "card": None if card is None else card.to_dict(),
-    })  # fmt: skip
-    (root / "README.md").write_text(render_card(card or DatasetCard(title=repo_id), repo_id, fps, features, len(rows), total))
+    _write_json(
+        root / "meta/info.json",
+        _info(fps, features, robot_type, len(rows), total, len(tasks), data_file_size_mb, chunks_size),
+    )
+    _write_json(
+        root / SIDECAR_DATASET,
+        {
+            "format": 1,
+            "repo_id": repo_id,
+            "features": {f.name: {"description": f.description, "unit": f.unit} for f in features},
+            "card": None if card is None else card.to_dict(),
+        },
+    )
+    (root / "README.md").write_text(
+        render_card(card or DatasetCard(title=repo_id), repo_id, fps, features, len(rows), total)
+    )
 
 
 def _info(fps, features, robot_type, episodes, frames, tasks, data_file_size_mb, chunks_size) -> dict:
@@ -331,12 +380,20 @@ def _info(fps, features, robot_type, episodes, frames, tasks, data_file_size_mb,
     feats = {f.name: f.info_entry() for f in features}
     feats.update({k: {"dtype": d, "shape": [1], "names": None} for k, d in INDEX_COLUMNS.items()})
     return {
-        "codebase_version": CODEBASE_VERSION, "robot_type": robot_type,
-        "total_episodes": episodes, "total_frames": frames, "total_tasks": tasks,
-        "chunks_size": chunks_size, "data_files_size_in_mb": data_file_size_mb, "video_files_size_in_mb": 200,
-        "fps": fps, "splits": {"train": f"0:{episodes}"},
-        "data_path": DATA_PATH, "video_path": None, "features": feats,
-    }  # fmt: skip
+        "codebase_version": CODEBASE_VERSION,
+        "robot_type": robot_type,
+        "total_episodes": episodes,
+        "total_frames": frames,
+        "total_tasks": tasks,
+        "chunks_size": chunks_size,
+        "data_files_size_in_mb": data_file_size_mb,
+        "video_files_size_in_mb": 200,
+        "fps": fps,
+        "splits": {"train": f"0:{episodes}"},
+        "data_path": DATA_PATH,
+        "video_path": None,
+        "features": feats,
+    }
 
 
 # --- merging -------------------------------------------------------------------------------------
@@ -354,7 +411,12 @@ def _merged_card(roots: Sequence[Path]) -> DatasetCard | None:
 
 
 def merge_datasets(
-    roots: Sequence[str | Path], out_root: str | Path, repo_id: str, overwrite: bool = False, *, card: DatasetCard | None = None
+    roots: Sequence[str | Path],
+    out_root: str | Path,
+    repo_id: str,
+    overwrite: bool = False,
+    *,
+    card: DatasetCard | None = None,
 ) -> Path:
     """Concatenate datasets (same fps, robot type and features) into one at ``out_root``.
 
@@ -380,7 +442,14 @@ def merge_datasets(
             yield from iter_episodes(r)
 
     return write_dataset(
-        out_root, repo_id, ref["fps"], read_features(roots[0]), episodes(),
-        robot_type=ref["robot_type"], card=card or _merged_card(roots), overwrite=overwrite,
-        data_file_size_mb=ref.get("data_files_size_in_mb", 100), chunks_size=ref.get("chunks_size", 1000),
-    )  # fmt: skip
+        out_root,
+        repo_id,
+        ref["fps"],
+        read_features(roots[0]),
+        episodes(),
+        robot_type=ref["robot_type"],
+        card=card or _merged_card(roots),
+        overwrite=overwrite,
+        data_file_size_mb=ref.get("data_files_size_in_mb", 100),
+        chunks_size=ref.get("chunks_size", 1000),
+    )

@@ -18,6 +18,15 @@ from pipeline.synthetic import (  # noqa: F401
 )
 
 __all__ = [
-    "HAND_OFFSET", "JOINT_NAMES", "PARENTS", "REST_OFFSETS", "SKELETON", "SUBJECT_HEIGHT", "TASKS",
-    "Phase", "SyntheticDemo", "default_clips", "default_demos",
-]  # fmt: skip
+    "HAND_OFFSET",
+    "JOINT_NAMES",
+    "PARENTS",
+    "REST_OFFSETS",
+    "SKELETON",
+    "SUBJECT_HEIGHT",
+    "TASKS",
+    "Phase",
+    "SyntheticDemo",
+    "default_clips",
+    "default_demos",
+]

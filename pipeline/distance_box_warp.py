@@ -74,7 +74,7 @@ def _box_phi(h: wp.vec3d, p: wp.vec3d) -> wp.float64:
 def _boxes(half: _V3, centre: _V3, p: wp.vec3d) -> vec7d:
     """Union of boxes: the nearest part's box field (the first on ties), closest point back in the union's frame."""
     best = _box_phi(half[0], p - centre[0])
-    part = int(0)
+    part = int(0)  # noqa: UP018 - a warp dynamic variable (a bare 0 is a constant inside the loop)
     for k in range(1, half.shape[0]):
         phi = _box_phi(half[k], p - centre[k])
         if phi < best:
@@ -108,7 +108,10 @@ def _parts(parts: tuple[tuple[tuple[float, float, float], tuple[float, float, fl
     """(half-extents, centres) of the parts as CPU warp arrays."""
     table = np.array([[*h, *o] for h, o in parts], dtype=np.float64).reshape(-1, 6)
     wp = warp()
-    return (wp.array(np.ascontiguousarray(table[:, :3]), dtype=wp.vec3d, device="cpu"), wp.array(np.ascontiguousarray(table[:, 3:]), dtype=wp.vec3d, device="cpu"))
+    return (
+        wp.array(np.ascontiguousarray(table[:, :3]), dtype=wp.vec3d, device="cpu"),
+        wp.array(np.ascontiguousarray(table[:, 3:]), dtype=wp.vec3d, device="cpu"),
+    )
 
 
 def box_world_field(half: tuple[float, float, float], points: np.ndarray, R: np.ndarray, t: np.ndarray):
@@ -117,7 +120,12 @@ def box_world_field(half: tuple[float, float, float], points: np.ndarray, R: np.
     return _launch_world(box_world, [wp.vec3d(*half)], points, R, t)
 
 
-def boxes_world_field(parts: tuple[tuple[tuple[float, float, float], tuple[float, float, float]], ...], points: np.ndarray, R: np.ndarray, t: np.ndarray):
+def boxes_world_field(
+    parts: tuple[tuple[tuple[float, float, float], tuple[float, float, float]], ...],
+    points: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+):
     """The field of the union of boxes ``parts`` ((half-extents, centre), ...; at least one) at numpy world
     ``points`` for poses (R, t), as :func:`box_world_field`."""
     if not parts:

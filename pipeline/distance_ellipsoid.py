@@ -162,7 +162,9 @@ class Ellipsoid:
         s_min = _newton(slope, zero, zero + length, False, xp, y)
         exists = f(s_min, y)[0] >= 0  # g <= 1 at its minimum
         roots = [_newton(f, zero, s_min, True, xp, y), _newton(f, s_min, zero + length, False, xp, y)]
-        return [[xp.where(exists, bk * bk * yk / (s + sh), float("nan")) for bk, yk, sh in zip(b, y, shift)] for s in roots]
+        return [
+            [xp.where(exists, bk * bk * yk / (s + sh), float("nan")) for bk, yk, sh in zip(b, y, shift)] for s in roots
+        ]
 
     # -- public ------------------------------------------------------------------------------------
     def inside(self, p) -> object:

@@ -149,8 +149,11 @@ def _eval(slope: int, s: wp.float64, y: wp.vec3d, e: Spec, base2: wp.float64) ->
 
 
 @wp.func
-def _newton(slope: int, increasing: int, pole: int, y: wp.vec3d, e: Spec, base2: wp.float64, lo0: wp.float64, hi0: wp.float64) -> wp.float64:
-    """Root in (lo0, hi0) of the monotone F (or -g'/2): Newton steps in the bracket, else the pole step (``pole``) or bisection."""
+def _newton(
+    slope: int, increasing: int, pole: int, y: wp.vec3d, e: Spec, base2: wp.float64, lo0: wp.float64, hi0: wp.float64
+) -> wp.float64:
+    """Root in (lo0, hi0) of the monotone F (or -g'/2): Newton steps in the bracket, else the pole step (``pole``) or
+    bisection."""
     lo = lo0
     hi = hi0
     s = wp.float64(0.5) * (lo + hi)

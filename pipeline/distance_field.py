@@ -94,7 +94,7 @@ class ObjectField:
     name: str = "object"
 
     @classmethod
-    def from_geometry(cls, geom: ObjectGeometry | dict, name: str = "object", **mesh_options) -> "ObjectField":
+    def from_geometry(cls, geom: ObjectGeometry | dict, name: str = "object", **mesh_options) -> ObjectField:
         """Field of a Primitive, Chair or MeshGeometry (or its :func:`geometry_to_dict` form).
         ``mesh_options`` go to :class:`pipeline.distance_mesh.MeshShape` (e.g. ``cache=False``)."""
         if isinstance(geom, dict):
@@ -110,7 +110,9 @@ class ObjectField:
             from pipeline.distance_mesh import MeshShape
 
             return cls(MeshShape.from_geometry(geom, **mesh_options), name)
-        raise InputError(None, f"{name} geometry", f"expected Primitive, Chair or MeshGeometry, got {type(geom).__name__}")
+        raise InputError(
+            None, f"{name} geometry", f"expected Primitive, Chair or MeshGeometry, got {type(geom).__name__}"
+        )
 
     def query(self, points, pose) -> FieldSample:
         """phi (N,), grad (N, 3), closest (N, 3) at world ``points`` (N, 3) for ``pose`` (7,) or per-point (N, 7)."""
@@ -123,7 +125,8 @@ class ObjectField:
         return self._run(points, pose, xp)
 
     def query_links(self, points, poses) -> FieldSample:
-        """Links over frames: ``points`` (T, K, 3) with object ``poses`` (T, 7) -> phi (T, K), grad/closest (T, K, 3)."""
+        """Links over frames: ``points`` (T, K, 3) with object ``poses`` (T, 7) -> phi (T, K), grad/closest (T, K,
+        3)."""
         xp = namespace(points)
         points = as_float(points, xp)
         poses = as_float(poses, xp, like=points)
@@ -139,7 +142,9 @@ class ObjectField:
             if fused is not None:
                 return fused
         lead = points.shape[:-1]
-        phi = xp.zeros(lead, dtype=points.dtype) if xp is np else xp.zeros(lead, dtype=points.dtype, device=points.device)
+        phi = (
+            xp.zeros(lead, dtype=points.dtype) if xp is np else xp.zeros(lead, dtype=points.dtype, device=points.device)
+        )
         grad, closest = 0.0 * points, 0.0 * points
         if pose.ndim == 1 and xp is not np:  # one pose: plain scalars broadcast fastest
             pose = pose.tolist()
@@ -184,14 +189,18 @@ class ObjectFields:
     def query(self, points, poses) -> NearestSample:
         """``points`` (N, 3); ``poses`` (M, 7) one per object, or (M, N, 7) per object and point."""
         if len(poses) != len(self.objects):
-            raise InputError(None, "object poses", f"expected {len(self.objects)} poses (one per object), got {len(poses)}")
+            raise InputError(
+                None, "object poses", f"expected {len(self.objects)} poses (one per object), got {len(poses)}"
+            )
         return self._nearest([o.query(points, poses[m]) for m, o in enumerate(self.objects)], namespace(points))
 
     def query_links(self, points, poses) -> NearestSample:
         """``points`` (T, K, 3), ``poses`` (T, M, 7) -> phi, object_index (T, K); grad, closest (T, K, 3)."""
         xp = namespace(points)
         if poses.ndim != 3 or poses.shape[1] != len(self.objects):
-            raise InputError(None, "object poses", f"expected shape (T, {len(self.objects)}, 7), got {tuple(poses.shape)}")
+            raise InputError(
+                None, "object poses", f"expected shape (T, {len(self.objects)}, 7), got {tuple(poses.shape)}"
+            )
         return self._nearest([o.query_links(points, poses[:, m]) for m, o in enumerate(self.objects)], xp)
 
     @staticmethod

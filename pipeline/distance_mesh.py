@@ -70,7 +70,14 @@ def _kernel():
     @wp.func
     def closest_query(mesh: wp.uint64, p: wp.vec3, lower: wp.vec3, upper: wp.vec3) -> wp.MeshQueryPoint:
         """Closest point with the winding-number sign inside [lower, upper]; outside it, no sign (0: outside)."""
-        if p[0] < lower[0] or p[1] < lower[1] or p[2] < lower[2] or p[0] > upper[0] or p[1] > upper[1] or p[2] > upper[2]:
+        if (
+            p[0] < lower[0]
+            or p[1] < lower[1]
+            or p[2] < lower[2]
+            or p[0] > upper[0]
+            or p[1] > upper[1]
+            or p[2] > upper[2]
+        ):
             return wp.mesh_query_point_no_sign(mesh, p, 1.0e6)
         return wp.mesh_query_point_sign_winding_number(mesh, p, 1.0e6, 2.0, 0.5)
 
@@ -101,7 +108,7 @@ def _kernel():
         cx = int(wp.floor(g[0]))
         cy = int(wp.floor(g[1]))
         cz = int(wp.floor(g[2]))
-        done = int(0)
+        done = int(0)  # noqa: UP018 - a warp dynamic variable (a bare 0 is a constant inside the loop)
         if use_tree != 0 and cx >= 0 and cy >= 0 and cz >= 0 and cx < nx and cy < ny and cz < nz:
             node = (cx * ny + cy) * nz + cz
             f = wp.vec3(g[0] - float(cx), g[1] - float(cy), g[2] - float(cz))
@@ -156,7 +163,7 @@ class MeshShape:
     _devices: dict = field(default_factory=dict, repr=False)
 
     @classmethod
-    def from_geometry(cls, geom: MeshGeometry, cache: bool = True, spec: OctreeSpec | None = None) -> "MeshShape":
+    def from_geometry(cls, geom: MeshGeometry, cache: bool = True, spec: OctreeSpec | None = None) -> MeshShape:
         """Load (InputError naming the file for a missing, empty or NaN mesh), scale the vertices,
         and with ``cache`` build (or load from disk) the octree field."""
         mesh = load_mesh(geom.path)
@@ -189,9 +196,17 @@ class MeshShape:
             self._devices[key] = self._upload(wp, "cpu" if key in ("numpy", "cpu") else key)
         dev, mesh, bounds, tree = self._devices[key]
         if is_numpy(xp):
-            host = [np.empty(n, np.float32), np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty(n, np.int8)]
+            host = [
+                np.empty(n, np.float32),
+                np.empty((n, 3), np.float32),
+                np.empty((n, 3), np.float32),
+                np.empty(n, np.int8),
+            ]
             pts = wp.array(np.ascontiguousarray(p, dtype=np.float32), dtype=wp.vec3, device="cpu")
-            outs = [wp.array(a, dtype=t, copy=False, device="cpu") for a, t in zip(host, [wp.float32, wp.vec3, wp.vec3, wp.int8])]
+            outs = [
+                wp.array(a, dtype=t, copy=False, device="cpu")
+                for a, t in zip(host, [wp.float32, wp.vec3, wp.vec3, wp.int8])
+            ]
         else:
             shapes = [((n,), xp.float32), ((n, 3), xp.float32), ((n, 3), xp.float32), ((n,), xp.int8)]
             host = [xp.empty(sh, dtype=dt, device=p.device) for sh, dt in shapes]
@@ -199,7 +214,9 @@ class MeshShape:
             outs = [wp.from_torch(a, dtype=t) for a, t in zip(host, [wp.float32, wp.vec3, wp.vec3, wp.int8])]
         use = 0 if exact or self.cached is None else 1
         if n:
-            wp.launch(_kernel(), dim=n, inputs=[mesh.id, *bounds, pts, use, *tree, self.shell], outputs=outs, device=dev)
+            wp.launch(
+                _kernel(), dim=n, inputs=[mesh.id, *bounds, pts, use, *tree, self.shell], outputs=outs, device=dev
+            )
             wp.synchronize_device(dev)
         phi, grad, closest = (as_float(a, xp, like=p) for a in host[:3])
         return phi, (grad[:, 0], grad[:, 1], grad[:, 2]), (closest[:, 0], closest[:, 1], closest[:, 2]), host[3] != 0
@@ -215,7 +232,16 @@ class MeshShape:
         )
         t = self.cached
         if t is None:
-            tree = [wp.vec3(0.0, 0.0, 0.0), 1.0, 0, 0, 0, wp.zeros(1, dtype=wp.int32, device=dev), wp.zeros(1, dtype=wp.int32, device=dev), wp.zeros((1, 8), dtype=wp.vec4, device=dev)]
+            tree = [
+                wp.vec3(0.0, 0.0, 0.0),
+                1.0,
+                0,
+                0,
+                0,
+                wp.zeros(1, dtype=wp.int32, device=dev),
+                wp.zeros(1, dtype=wp.int32, device=dev),
+                wp.zeros((1, 8), dtype=wp.vec4, device=dev),
+            ]
         else:
             tree = [
                 wp.vec3(*[float(v) for v in t.origin]),

@@ -34,9 +34,12 @@ from pathlib import Path
 
 import numpy as np
 
-
-_CORNERS = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)], dtype=np.int64)  # child/corner order a*4+b*2+c
-_LATTICE = np.array([[a, b, c] for a in (0, 1, 2) for b in (0, 1, 2) for c in (0, 1, 2)], dtype=np.int64)  # in half cells
+_CORNERS = np.array(
+    [[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)], dtype=np.int64
+)  # child/corner order a*4+b*2+c
+_LATTICE = np.array(
+    [[a, b, c] for a in (0, 1, 2) for b in (0, 1, 2) for c in (0, 1, 2)], dtype=np.int64
+)  # in half cells
 _NEW = np.array([i for i, q in enumerate(_LATTICE) if (q % 2).any()])  # the 19 lattice points that are not corners
 _CHECKS = np.concatenate([_LATTICE[_NEW] / 2.0, (_CORNERS + 0.5) / 2.0])  # 19 + 8 child centres, in cells
 _BUILD_CHUNK = 16384  # cells per exact batch while building
@@ -86,7 +89,7 @@ class CachedField:
     values: np.ndarray
 
     @classmethod
-    def build(cls, exact, lo, hi, spec: OctreeSpec) -> "CachedField":
+    def build(cls, exact, lo, hi, spec: OctreeSpec) -> CachedField:
         """Sample ``exact(p (n, 3)) -> (phi, grad, closest)`` (numpy, object frame) over [lo, hi] + margin."""
         lo = np.asarray(lo, float) - spec.margin
         n = np.ceil((np.asarray(hi, float) + spec.margin - lo) / spec.root).astype(np.int64)
@@ -111,7 +114,10 @@ class CachedField:
                 err_phi = np.abs(np.abs(sd_i) - phi).max(1)
                 flips = ((sd_i < 0) != (sample[:, :, 0] < 0)) & (phi > spec.tol_near)
                 if spec.tol_grad is not None:  # grad~ = sign(sd~) u~/|u~| against sign(sd) u/|u|, outside only
-                    gi = guess[:, :, 1:] * (np.sign(sd_i) / np.maximum(np.linalg.norm(guess[:, :, 1:], axis=-1), 1e-300))[..., None]
+                    gi = (
+                        guess[:, :, 1:]
+                        * (np.sign(sd_i) / np.maximum(np.linalg.norm(guess[:, :, 1:], axis=-1), 1e-300))[..., None]
+                    )
                     ge = sample[:, :, 1:] / np.maximum(phi, 1e-12)[..., None]
                     flips |= (np.linalg.norm(gi - ge, axis=-1) > spec.tol_grad) & (sample[:, :, 0] > spec.tol_near)
                 near = np.minimum(phi.min(1), np.abs(cor[:, :, 0]).min(1)) - h * np.sqrt(3) / 2 <= spec.band
@@ -145,10 +151,19 @@ class CachedField:
 
     # -- storage -----------------------------------------------------------------------------------
     def save(self, path: Path) -> None:
-        np.savez(path, origin=self.origin, n=self.n, root=self.root, depth=self.depth, child=self.child, leaf=self.leaf, values=self.values)
+        np.savez(
+            path,
+            origin=self.origin,
+            n=self.n,
+            root=self.root,
+            depth=self.depth,
+            child=self.child,
+            leaf=self.leaf,
+            values=self.values,
+        )
 
     @classmethod
-    def load(cls, path: Path) -> "CachedField":
+    def load(cls, path: Path) -> CachedField:
         with np.load(path) as z:
             return cls(z["origin"], z["n"], float(z["root"]), int(z["depth"]), z["child"], z["leaf"], z["values"])
 

@@ -51,7 +51,15 @@ def _local(R: wp.mat33d, t: wp.vec3d, x: wp.vec3d) -> wp.vec3d:
 
 
 @wp.func
-def _write_world(R: wp.mat33d, t: wp.vec3d, r: vec7d, i: int, phi: wp.array(dtype=wp.float64), grad: wp.array(dtype=wp.vec3d), closest: wp.array(dtype=wp.vec3d)):
+def _write_world(
+    R: wp.mat33d,
+    t: wp.vec3d,
+    r: vec7d,
+    i: int,
+    phi: wp.array(dtype=wp.float64),
+    grad: wp.array(dtype=wp.vec3d),
+    closest: wp.array(dtype=wp.vec3d),
+):
     """phi, grad = R g, closest = R c + t: an object-frame result back in the world."""
     phi[i] = r[0]
     grad[i] = R * wp.vec3d(r[1], r[2], r[3])
@@ -179,6 +187,7 @@ def _capsule(cap: ell.Spec, sec: ell.Spec, h: wp.float64, restricted: int, p0: w
                 c = wp.vec3d(r[1], r[2], r[3])
     return _pack(phi, wp.vec3d(g[0], g[1], sz * g[2]), wp.vec3d(c[0], c[1], sz * c[2]))
 
+
 _F64 = wp.array(dtype=wp.float64)
 _V3 = wp.array(dtype=wp.vec3d)
 _M33 = wp.array(dtype=wp.mat33d)
@@ -197,7 +206,16 @@ def cylinder_field(sec: ell.Spec, h: wp.float64, x: _F64, y: _F64, z: _F64, out:
 
 
 @wp.kernel
-def capsule_field(cap: ell.Spec, sec: ell.Spec, h: wp.float64, restricted: int, x: _F64, y: _F64, z: _F64, out: wp.array2d(dtype=wp.float64)):
+def capsule_field(
+    cap: ell.Spec,
+    sec: ell.Spec,
+    h: wp.float64,
+    restricted: int,
+    x: _F64,
+    y: _F64,
+    z: _F64,
+    out: wp.array2d(dtype=wp.float64),
+):
     i = wp.tid()
     _write(out, i, _capsule(cap, sec, h, restricted, wp.vec3d(x[i], y[i], z[i])))
 
@@ -221,7 +239,19 @@ def cylinder_world(sec: ell.Spec, h: wp.float64, R: _M33, t: _V3, k: int, x: _V3
 
 
 @wp.kernel
-def capsule_world(cap: ell.Spec, sec: ell.Spec, h: wp.float64, restricted: int, R: _M33, t: _V3, k: int, x: _V3, phi: _F64, grad: _V3, closest: _V3):
+def capsule_world(
+    cap: ell.Spec,
+    sec: ell.Spec,
+    h: wp.float64,
+    restricted: int,
+    R: _M33,
+    t: _V3,
+    k: int,
+    x: _V3,
+    phi: _F64,
+    grad: _V3,
+    closest: _V3,
+):
     j = wp.tid()
     Rj = R[j]
     tj = t[j]
@@ -263,8 +293,17 @@ def _launch_world(kernel, args: list, points: np.ndarray, R: np.ndarray, t: np.n
         raise ValueError(f"{n} points do not split into {poses} poses")
     phi, grad, closest = np.empty(n), np.empty((n, 3)), np.empty((n, 3))
     if n:
-        cols = [(R, wp.mat33d), (t, wp.vec3d), (points, wp.vec3d), (phi, wp.float64), (grad, wp.vec3d), (closest, wp.vec3d)]
-        R, t, pts, *outs = [wp.array(np.ascontiguousarray(a, dtype=np.float64), dtype=d, copy=False, device="cpu") for a, d in cols]
+        cols = [
+            (R, wp.mat33d),
+            (t, wp.vec3d),
+            (points, wp.vec3d),
+            (phi, wp.float64),
+            (grad, wp.vec3d),
+            (closest, wp.vec3d),
+        ]
+        R, t, pts, *outs = [
+            wp.array(np.ascontiguousarray(a, dtype=np.float64), dtype=d, copy=False, device="cpu") for a, d in cols
+        ]
         wp.launch(kernel, dim=poses, inputs=[*args, R, t, n // poses, pts], outputs=outs, device="cpu")
     return phi, grad, closest
 
@@ -299,11 +338,15 @@ def sphere_world_field(radii: tuple[float, float, float], points: np.ndarray, R:
     return _launch_world(sphere_world, [_spec(radii)], points, R, t)
 
 
-def cylinder_world_field(radii: tuple[float, float], half_length: float, points: np.ndarray, R: np.ndarray, t: np.ndarray):
+def cylinder_world_field(
+    radii: tuple[float, float], half_length: float, points: np.ndarray, R: np.ndarray, t: np.ndarray
+):
     """:func:`cylinder` at numpy world ``points`` for poses (R, t), as :func:`sphere_world_field`."""
     return _launch_world(cylinder_world, _cylinder_args(radii, half_length), points, R, t)
 
 
-def capsule_world_field(radii: tuple[float, float, float], half_length: float, points: np.ndarray, R: np.ndarray, t: np.ndarray):
+def capsule_world_field(
+    radii: tuple[float, float, float], half_length: float, points: np.ndarray, R: np.ndarray, t: np.ndarray
+):
     """:func:`capsule` at numpy world ``points`` for poses (R, t), as :func:`sphere_world_field`."""
     return _launch_world(capsule_world, _capsule_args(radii, half_length), points, R, t)

@@ -72,8 +72,12 @@ class FootContacts:
 def _side_of(name: str) -> str | None:
     low = name.lower()
     for side in SIDES:
-        if (side in low or re.match(rf"^{side[0]}[_.\- ]", low) or re.match(rf"^{side[0].upper()}[A-Z]", name)
-                or re.match(rf"^{side[0]}(foot|ankle|toe)", low)):
+        if (
+            side in low
+            or re.match(rf"^{side[0]}[_.\- ]", low)
+            or re.match(rf"^{side[0].upper()}[A-Z]", name)
+            or re.match(rf"^{side[0]}(foot|ankle|toe)", low)
+        ):
             return side
     return None
 
@@ -149,9 +153,15 @@ def _horizontal_speed(xy: np.ndarray, fps: float) -> np.ndarray:
     return np.linalg.norm(np.gradient(xy, axis=0), axis=-1) * fps
 
 
-def detect_foot_contacts(clip: HumanClip, *, height_tol: float = HEIGHT_TOL, speed_tol: float = SPEED_TOL,
-                         percentile: float = FLOOR_PERCENTILE, min_contact_s: float = MIN_CONTACT_S,
-                         min_gap_s: float = MIN_GAP_S) -> FootContacts:  # fmt: skip
+def detect_foot_contacts(
+    clip: HumanClip,
+    *,
+    height_tol: float = HEIGHT_TOL,
+    speed_tol: float = SPEED_TOL,
+    percentile: float = FLOOR_PERCENTILE,
+    min_contact_s: float = MIN_CONTACT_S,
+    min_gap_s: float = MIN_GAP_S,
+) -> FootContacts:
     """Foot-ground contact flags of ``clip`` (see the module doc for the math)."""
     feet = find_foot_joints(clip.skeleton.joint_names)
     names = [n for side in SIDES for n in feet[side]]

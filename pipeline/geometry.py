@@ -60,7 +60,7 @@ class Primitive:
             base = (s[0], s[0], s[1] + (s[0] if self.kind == "capsule" else 0.0))
         return np.asarray(base) * np.asarray(self.scale)
 
-    def scaled(self, factor) -> "Primitive":
+    def scaled(self, factor) -> Primitive:
         return Primitive(self.kind, self.size, tuple(np.asarray(self.scale) * np.broadcast_to(factor, (3,))))
 
 
@@ -80,7 +80,7 @@ class MeshGeometry:
         if self.collision not in ("hull", "decomposition"):
             raise ValueError(f"mesh collision must be 'hull' or 'decomposition', got {self.collision!r}")
 
-    def scaled(self, factor) -> "MeshGeometry":
+    def scaled(self, factor) -> MeshGeometry:
         return MeshGeometry(self.path, tuple(np.asarray(self.scale) * np.broadcast_to(factor, (3,))), self.collision)
 
 
@@ -118,7 +118,11 @@ class Chair:
         ]
         for i, (sx, sy) in enumerate([(1, 1), (1, -1), (-1, 1), (-1, -1)]):
             parts.append(
-                (f"leg{i}", Primitive("box", (lw, lw, leg_h / 2)), np.array([sx * (hd - lw), sy * (hw - lw), leg_h / 2]))
+                (
+                    f"leg{i}",
+                    Primitive("box", (lw, lw, leg_h / 2)),
+                    np.array([sx * (hd - lw), sy * (hw - lw), leg_h / 2]),
+                )
             )
         return parts
 

@@ -26,7 +26,9 @@ IGNORE_PATTERNS = ["images/*", ".*", "*/.*"]
 def _check_dataset(root: Path) -> dict:
     info = read_info(root)
     if info.get("codebase_version") != CODEBASE_VERSION:
-        raise InputError(root, "codebase_version", f"is {info.get('codebase_version')!r}, expected {CODEBASE_VERSION!r}")
+        raise InputError(
+            root, "codebase_version", f"is {info.get('codebase_version')!r}, expected {CODEBASE_VERSION!r}"
+        )
     for rel in ("meta/stats.json", "meta/tasks.parquet", "README.md"):
         if not (root / rel).is_file():
             raise InputError(root, rel, "is missing: not a complete dataset")
@@ -35,7 +37,9 @@ def _check_dataset(root: Path) -> dict:
     return info
 
 
-def publish(root: str | Path, repo_id: str, *, private: bool = False, api=None, commit_message: str | None = None) -> str:
+def publish(
+    root: str | Path, repo_id: str, *, private: bool = False, api=None, commit_message: str | None = None
+) -> str:
     """Upload the dataset folder ``root`` to the hub dataset repo ``repo_id`` and tag it ``v3.0``.
 
     Returns the repo URL. Re-publishing moves the tag to the new commit.
@@ -53,9 +57,12 @@ def publish(root: str | Path, repo_id: str, *, private: bool = False, api=None, 
         api = HfApi()
     url = api.create_repo(repo_id=repo_id, repo_type="dataset", private=private, exist_ok=True)
     api.upload_folder(
-        repo_id=repo_id, folder_path=str(root), repo_type="dataset", ignore_patterns=IGNORE_PATTERNS,
+        repo_id=repo_id,
+        folder_path=str(root),
+        repo_type="dataset",
+        ignore_patterns=IGNORE_PATTERNS,
         commit_message=commit_message or f"Upload LeRobot {CODEBASE_VERSION} dataset",
-    )  # fmt: skip
+    )
     with contextlib.suppress(RevisionNotFoundError, HfHubHTTPError):
         api.delete_tag(repo_id, tag=CODEBASE_VERSION, repo_type="dataset")
     api.create_tag(repo_id, tag=CODEBASE_VERSION, repo_type="dataset")

@@ -41,7 +41,11 @@ class FrameVelocityLimit(mink.VelocityLimit):
         self.dt = float(dt)
         idx, qadr, limit = list(self.indices), list(model.jnt_qposadr[model.dof_jntid[self.indices]]), list(self.limit)
         if root_speed is not None:
-            free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE and model.jnt_bodyid[j] == 1]
+            free = [
+                j
+                for j in range(model.njnt)
+                if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE and model.jnt_bodyid[j] == 1
+            ]
             if not free:
                 raise ValueError("FrameVelocityLimit: root_speed given but the model's first body has no free joint")
             d0, a0 = model.jnt_dofadr[free[0]], model.jnt_qposadr[free[0]]
@@ -63,7 +67,9 @@ class FrameVelocityLimit(mink.VelocityLimit):
 
 
 def _path_joints(model: mujoco.MjModel, b1: int, b2: int) -> list[int]:
-    """Joints between bodies ``b1`` and ``b2`` (below their common ancestor): their relative pose depends on these only."""
+    """Joints between bodies ``b1`` and ``b2`` (below their common ancestor): their relative pose depends on these
+    only."""
+
     def chain(b):
         out = [b]
         while b:
@@ -77,12 +83,34 @@ def _path_joints(model: mujoco.MjModel, b1: int, b2: int) -> list[int]:
     return [j for b in bodies for j in range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b])]
 
 
-_KEPT_APART: dict[str, frozenset[tuple[int, int]]] = {}  # pairs_kept_apart_by_joint_limits's cache, keyed by the model arrays below
-_TREE_FIELDS = ("geom_type", "geom_size", "geom_pos", "geom_quat", "geom_bodyid", "geom_rbound", "body_parentid", "body_pos", "body_quat",
-                "body_jntadr", "body_jntnum", "jnt_type", "jnt_range", "jnt_limited", "jnt_pos", "jnt_axis", "jnt_qposadr", "qpos0")  # fmt: skip
+_KEPT_APART: dict[
+    str, frozenset[tuple[int, int]]
+] = {}  # pairs_kept_apart_by_joint_limits's cache, keyed by the model arrays below
+_TREE_FIELDS = (
+    "geom_type",
+    "geom_size",
+    "geom_pos",
+    "geom_quat",
+    "geom_bodyid",
+    "geom_rbound",
+    "body_parentid",
+    "body_pos",
+    "body_quat",
+    "body_jntadr",
+    "body_jntnum",
+    "jnt_type",
+    "jnt_range",
+    "jnt_limited",
+    "jnt_pos",
+    "jnt_axis",
+    "jnt_qposadr",
+    "qpos0",
+)
 
 
-def pairs_kept_apart_by_joint_limits(model: mujoco.MjModel, pairs: list[tuple[int, int]], samples: int = 41) -> set[tuple[int, int]]:
+def pairs_kept_apart_by_joint_limits(
+    model: mujoco.MjModel, pairs: list[tuple[int, int]], samples: int = 41
+) -> set[tuple[int, int]]:
     """Geom pairs that their joint limits alone keep from touching (e.g. the G1's ankle linkage brace and foot).
     Cached per process by the pairs and the model's kinematic tree and geoms (each clip compiles its own
     scene, with the same robot: the sampling took ~0.25 s of every physicalized clip).
@@ -107,7 +135,9 @@ def _kept_apart(model: mujoco.MjModel, pairs: list[tuple[int, int]], samples: in
     by_path: dict[tuple[int, ...], list[tuple[int, int]]] = {}
     for a, b in pairs:
         joints = tuple(_path_joints(model, int(model.geom_bodyid[a]), int(model.geom_bodyid[b])))
-        hinges = all(int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_HINGE) and model.jnt_limited[j] for j in joints)
+        hinges = all(
+            int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_HINGE) and model.jnt_limited[j] for j in joints
+        )
         if 1 <= len(joints) <= 2 and hinges:
             by_path.setdefault(joints, []).append((a, b))
     for joints, group in by_path.items():
@@ -120,7 +150,10 @@ def _kept_apart(model: mujoco.MjModel, pairs: list[tuple[int, int]], samples: in
             mujoco.mj_kinematics(model, data)
             lowest = np.minimum(lowest, [mujoco.mj_geomDistance(model, data, a, b, 1.0, None) for a, b in group])
         for (a, b), low in zip(group, lowest):
-            reach = [max(np.linalg.norm(data.geom_xpos[g] - data.xanchor[j]) + model.geom_rbound[g] for g in (a, b)) for j in joints]
+            reach = [
+                max(np.linalg.norm(data.geom_xpos[g] - data.xanchor[j]) + model.geom_rbound[g] for g in (a, b))
+                for j in joints
+            ]
             margin = sum(r * (g[1] - g[0]) / 2 for r, g in zip(reach, grids))
             if low > margin:
                 out.add((a, b))
@@ -154,7 +187,8 @@ class SeparationLimit(mink.CollisionAvoidanceLimit):
     relaxed: bool = False
 
     def __init__(self, model: mujoco.MjModel, geom_pairs, *, skip_kept_apart: bool = False, **kwargs):
-        """``skip_kept_apart``: drop pairs that joint limits alone keep apart (:func:`pairs_kept_apart_by_joint_limits`)."""
+        """``skip_kept_apart``: drop pairs that joint limits alone keep apart
+        (:func:`pairs_kept_apart_by_joint_limits`)."""
         self.skip_kept_apart = skip_kept_apart
         super().__init__(model, geom_pairs, **kwargs)
 
@@ -168,9 +202,15 @@ class SeparationLimit(mink.CollisionAvoidanceLimit):
                 if (min(ba, bb) << 16) + max(ba, bb) in excluded:
                     continue
                 wa, wb = m.body_weldid[ba], m.body_weldid[bb]
-                if wa == wb or not (m.geom_contype[a] & m.geom_conaffinity[b] or m.geom_contype[b] & m.geom_conaffinity[a]):
+                if wa == wb or not (
+                    m.geom_contype[a] & m.geom_conaffinity[b] or m.geom_contype[b] & m.geom_conaffinity[a]
+                ):
                     continue
-                if wa != 0 and wb != 0 and (m.body_weldid[m.body_parentid[wa]] == wb or m.body_weldid[m.body_parentid[wb]] == wa):
+                if (
+                    wa != 0
+                    and wb != 0
+                    and (m.body_weldid[m.body_parentid[wa]] == wb or m.body_weldid[m.body_parentid[wb]] == wa)
+                ):
                     continue
                 out.add((min(a, b), max(a, b)))
         if self.skip_kept_apart:
@@ -182,7 +222,11 @@ class SeparationLimit(mink.CollisionAvoidanceLimit):
         model, data = self.model, configuration.data
         if self.max_num_contacts == 0:
             return Constraint()
-        idx = self._broadphase_survivors(data) if self.max_num_contacts >= self.broadphase_min_pairs else range(self.max_num_contacts)
+        idx = (
+            self._broadphase_survivors(data)
+            if self.max_num_contacts >= self.broadphase_min_pairs
+            else range(self.max_num_contacts)
+        )
         rows, bounds = [], []
         dmax, dmin = self.collision_detection_distance, self.minimum_distance_from_collisions
         for i in idx:
@@ -190,7 +234,9 @@ class SeparationLimit(mink.CollisionAvoidanceLimit):
             d = mujoco.mj_geomDistance(model, data, g1, g2, dmax, self._fromto)
             if d >= dmax - 1e-12:
                 continue
-            row = compute_contact_normal_jacobian(model, data, g1, g2, self._fromto, self._normal, self._jac1, self._jac2)
+            row = compute_contact_normal_jacobian(
+                model, data, g1, g2, self._fromto, self._normal, self._jac1, self._jac2
+            )
             # For d >= 0 the normal points from geom 1 to geom 2, so row dq is d's rate; for d < 0 fromto is reversed.
             rows.append(-row if d >= 0 else row)
             h = self.gain * (d - dmin)
@@ -217,10 +263,21 @@ class FloorLimit(mink.Limit):
 
     relaxed: bool = False
 
-    def __init__(self, model: mujoco.MjModel, geoms: list[int], floor: int, gain: float = 0.85,
-                 minimum_distance: float = 0.0, detection_distance: float = 0.05):  # fmt: skip
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        geoms: list[int],
+        floor: int,
+        gain: float = 0.85,
+        minimum_distance: float = 0.0,
+        detection_distance: float = 0.05,
+    ):
         level = np.allclose(model.geom_quat[floor], [1.0, 0.0, 0.0, 0.0])
-        if int(model.geom_type[floor]) != int(mujoco.mjtGeom.mjGEOM_PLANE) or model.geom_bodyid[floor] != 0 or not level:
+        if (
+            int(model.geom_type[floor]) != int(mujoco.mjtGeom.mjGEOM_PLANE)
+            or model.geom_bodyid[floor] != 0
+            or not level
+        ):
             raise ValueError(f"geom {model.geom(floor).name} is not a horizontal world plane")
         kinds = {int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_CAPSULE)}
         odd = [model.geom(g).name for g in geoms if int(model.geom_type[g]) not in kinds]

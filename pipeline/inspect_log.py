@@ -40,10 +40,25 @@ import mujoco
 import numpy as np
 from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
 from foxglove.messages import (
-    Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms, LinePrimitive, LinePrimitiveLineType,
-    Point3, Pose, Quaternion, SceneEntity, SceneEntityDeletion, SceneEntityDeletionType, SceneUpdate, SpherePrimitive,
-    Timestamp, TriangleListPrimitive, Vector3,
-)  # fmt: skip
+    Color,
+    CubePrimitive,
+    CylinderPrimitive,
+    FrameTransform,
+    FrameTransforms,
+    LinePrimitive,
+    LinePrimitiveLineType,
+    Point3,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneEntityDeletion,
+    SceneEntityDeletionType,
+    SceneUpdate,
+    SpherePrimitive,
+    Timestamp,
+    TriangleListPrimitive,
+    Vector3,
+)
 
 from pipeline.clip import HumanClip, ObjectTrack, RobotClip
 from pipeline.collision_mesh import load_mesh
@@ -60,15 +75,17 @@ _CONTACT_RGBA = Color(r=1.0, g=0.1, b=0.1, a=1.0)
 _CONTACT_SCHEMA = foxglove.Schema(
     name="lessmimic.Contacts",
     encoding="jsonschema",
-    data=json.dumps({
-        "type": "object",
-        "properties": {
-            "frame": {"type": "integer"},
-            "contacts": {"type": "object", "additionalProperties": {"type": "boolean"}},
-            "objects": {"type": "object", "additionalProperties": {"type": "boolean"}},
-        },
-    }).encode(),
-)  # fmt: skip
+    data=json.dumps(
+        {
+            "type": "object",
+            "properties": {
+                "frame": {"type": "integer"},
+                "contacts": {"type": "object", "additionalProperties": {"type": "boolean"}},
+                "objects": {"type": "object", "additionalProperties": {"type": "boolean"}},
+            },
+        }
+    ).encode(),
+)
 
 
 def object_frame(name: str) -> str:
@@ -93,7 +110,9 @@ def _stamp(ns: int) -> Timestamp:
 
 
 def _tf(ns: int, child: str, p, q_wxyz) -> FrameTransform:
-    return FrameTransform(timestamp=_stamp(ns), parent_frame_id=WORLD, child_frame_id=child, translation=_vec(p), rotation=_quat(q_wxyz))
+    return FrameTransform(
+        timestamp=_stamp(ns), parent_frame_id=WORLD, child_frame_id=child, translation=_vec(p), rotation=_quat(q_wxyz)
+    )
 
 
 def _capsule(pose_p: np.ndarray, pose_q: np.ndarray, r: np.ndarray, h: float, color: Color) -> dict[str, list]:
@@ -102,9 +121,19 @@ def _capsule(pose_p: np.ndarray, pose_q: np.ndarray, r: np.ndarray, h: float, co
     mujoco.mju_quat2Mat(rot, pose_q)
     axis = rot.reshape(3, 3)[:, 2] * h
     return {
-        "cylinders": [CylinderPrimitive(pose=_pose(pose_p, pose_q), size=_vec([2 * r[0], 2 * r[1], 2 * h]), bottom_scale=1, top_scale=1, color=color)],
-        "spheres": [SpherePrimitive(pose=_pose(pose_p + s * axis, pose_q), size=_vec(2 * r), color=color) for s in (-1, 1)],
-    }  # fmt: skip
+        "cylinders": [
+            CylinderPrimitive(
+                pose=_pose(pose_p, pose_q),
+                size=_vec([2 * r[0], 2 * r[1], 2 * h]),
+                bottom_scale=1,
+                top_scale=1,
+                color=color,
+            )
+        ],
+        "spheres": [
+            SpherePrimitive(pose=_pose(pose_p + s * axis, pose_q), size=_vec(2 * r), color=color) for s in (-1, 1)
+        ],
+    }
 
 
 def _decimate(v: np.ndarray, f: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
@@ -112,7 +141,9 @@ def _decimate(v: np.ndarray, f: np.ndarray, max_faces: int) -> tuple[np.ndarray,
     cells = max(2, int(np.sqrt(max_faces)))
     lo, extent = v.min(0), float(np.ptp(v, axis=0).max()) or 1.0
     while len(f) > max_faces and cells >= 2:
-        _, inv, counts = np.unique(np.floor((v - lo) / (extent / cells)).astype(np.int64), axis=0, return_inverse=True, return_counts=True)
+        _, inv, counts = np.unique(
+            np.floor((v - lo) / (extent / cells)).astype(np.int64), axis=0, return_inverse=True, return_counts=True
+        )
         inv = inv.reshape(-1)
         nf = inv[f]
         nf = nf[(nf[:, 0] != nf[:, 1]) & (nf[:, 1] != nf[:, 2]) & (nf[:, 0] != nf[:, 2])]
@@ -133,21 +164,35 @@ def _object_entity(obj: ObjectTrack) -> SceneEntity:
         elif geo.kind == "sphere":
             prims["spheres"].append(SpherePrimitive(pose=_pose(), size=_vec(2 * s[0] * sc), color=_OBJECT_RGBA))
         elif geo.kind == "cylinder":
-            prims["cylinders"].append(CylinderPrimitive(pose=_pose(), size=_vec(2 * s[[0, 0, 1]] * sc), bottom_scale=1, top_scale=1, color=_OBJECT_RGBA))
+            prims["cylinders"].append(
+                CylinderPrimitive(
+                    pose=_pose(), size=_vec(2 * s[[0, 0, 1]] * sc), bottom_scale=1, top_scale=1, color=_OBJECT_RGBA
+                )
+            )
         else:
             for k, v in _capsule(np.zeros(3), np.array([1.0, 0, 0, 0]), s[0] * sc, s[1] * sc[2], _OBJECT_RGBA).items():
                 prims[k] += v
     elif isinstance(geo, Chair):
         for _, box, centre in geo.parts():
-            prims["cubes"].append(CubePrimitive(pose=_pose(centre), size=_vec(2 * np.asarray(box.size)), color=_OBJECT_RGBA))
+            prims["cubes"].append(
+                CubePrimitive(pose=_pose(centre), size=_vec(2 * np.asarray(box.size)), color=_OBJECT_RGBA)
+            )
     elif isinstance(geo, MeshGeometry):
         mesh = load_mesh(geo.path)  # InputError if missing or unreadable
         v, f = _decimate(np.asarray(mesh.vertices) * np.asarray(geo.scale), np.asarray(mesh.faces), MAX_MESH_FACES)
-        prims["triangles"].append(TriangleListPrimitive(pose=_pose(), points=[Point3(x=a, y=b, z=c) for a, b, c in v.tolist()],
-                                                        color=_OBJECT_RGBA, indices=f.reshape(-1).tolist()))  # fmt: skip
+        prims["triangles"].append(
+            TriangleListPrimitive(
+                pose=_pose(),
+                points=[Point3(x=a, y=b, z=c) for a, b, c in v.tolist()],
+                color=_OBJECT_RGBA,
+                indices=f.reshape(-1).tolist(),
+            )
+        )
     else:
         raise TypeError(f"object {obj.name}: unsupported geometry {type(geo).__name__}")
-    return SceneEntity(timestamp=_stamp(0), frame_id=object_frame(obj.name), id=f"object/{obj.name}", frame_locked=True, **prims)
+    return SceneEntity(
+        timestamp=_stamp(0), frame_id=object_frame(obj.name), id=f"object/{obj.name}", frame_locked=True, **prims
+    )
 
 
 def _robot_entities(m: mujoco.MjModel, bodies: list[int]) -> list[SceneEntity]:
@@ -160,7 +205,9 @@ def _robot_entities(m: mujoco.MjModel, bodies: list[int]) -> list[SceneEntity]:
                 continue
             p, q, size = m.geom_pos[g], m.geom_quat[g], m.geom_size[g]
             if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE:
-                prims["spheres"].append(SpherePrimitive(pose=_pose(p, q), size=_vec([2 * size[0]] * 3), color=_ROBOT_RGBA))
+                prims["spheres"].append(
+                    SpherePrimitive(pose=_pose(p, q), size=_vec([2 * size[0]] * 3), color=_ROBOT_RGBA)
+                )
             elif m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE:
                 for k, v in _capsule(p, q, np.full(3, size[0]), float(size[1]), _ROBOT_RGBA).items():
                     prims[k] += v
@@ -200,8 +247,11 @@ def _log_static(ctx: foxglove.Context, entities: Iterable[SceneEntity]) -> None:
 
 
 def _contacts_msg(k: int, names: Iterable[str], flags, objects: tuple[ObjectTrack, ...]) -> dict:
-    return {"frame": k, "contacts": {n: bool(c) for n, c in zip(names, flags)},
-            "objects": {o.name: bool(o.contact[k]) for o in objects if o.contact is not None}}  # fmt: skip
+    return {
+        "frame": k,
+        "contacts": {n: bool(c) for n, c in zip(names, flags)},
+        "objects": {o.name: bool(o.contact[k]) for o in objects if o.contact is not None},
+    }
 
 
 def _delete_all(ns: int) -> SceneEntityDeletion:
@@ -230,9 +280,17 @@ def write_robot_log(clip: RobotClip, path: Path, *, scene: Scene | None = None) 
             tfs += [_tf(ns, object_frame(o.name), o.pose[k, :3], o.pose[k, 3:]) for o in clip.objects]
             tf.log(FrameTransforms(transforms=tfs), log_time=ns)
             flags = clip.contacts[k] if clip.contacts is not None else np.zeros(len(clip.contact_links), bool)
-            spheres = [SceneEntity(timestamp=_stamp(ns), frame_id=n, id=f"contact/{n}", frame_locked=True,
-                                   spheres=[SpherePrimitive(pose=_pose(), size=_vec([0.08] * 3), color=_CONTACT_RGBA)])
-                       for n, c in zip(clip.contact_links, flags) if c and n in body_of]  # fmt: skip
+            spheres = [
+                SceneEntity(
+                    timestamp=_stamp(ns),
+                    frame_id=n,
+                    id=f"contact/{n}",
+                    frame_locked=True,
+                    spheres=[SpherePrimitive(pose=_pose(), size=_vec([0.08] * 3), color=_CONTACT_RGBA)],
+                )
+                for n, c in zip(clip.contact_links, flags)
+                if c and n in body_of
+            ]
             markers.log(SceneUpdate(deletions=[_delete_all(ns)], entities=spheres), log_time=ns)
             contacts.log(_contacts_msg(k, clip.contact_links, flags, clip.objects), log_time=ns)
 
@@ -242,7 +300,9 @@ def write_robot_log(clip: RobotClip, path: Path, *, scene: Scene | None = None) 
 def write_human_log(clip: HumanClip, path: Path) -> Path:
     """Write ``clip`` as an MCAP inspection log at ``path`` (see the module docstring); returns ``path``."""
     joints, parents = clip.skeleton.joint_names, clip.skeleton.parents
-    bone_idx = np.asarray([(p, j) for j, p in enumerate(parents) if p >= 0], dtype=int).reshape(-1)  # parent, child, ...
+    bone_idx = np.asarray([(p, j) for j, p in enumerate(parents) if p >= 0], dtype=int).reshape(
+        -1
+    )  # parent, child, ...
     static = [_object_entity(o) for o in clip.objects]
     identity = np.array([1.0, 0.0, 0.0, 0.0])
 
@@ -259,11 +319,23 @@ def write_human_log(clip: HumanClip, path: Path) -> Path:
             flags = clip.contacts[k] if clip.contacts is not None else np.zeros(len(joints), bool)
             pts = [Point3(x=x, y=y, z=z) for x, y, z in pos[bone_idx].tolist()]
             entity = SceneEntity(
-                timestamp=_stamp(ns), frame_id=WORLD, id="skeleton",
-                lines=[LinePrimitive(type=LinePrimitiveLineType.LineList, pose=_pose(), thickness=0.02, points=pts, color=_BONE_RGBA)] if pts else [],
-                spheres=[SpherePrimitive(pose=_pose(pos[j]), size=_vec([0.05] * 3), color=_CONTACT_RGBA if flags[j] else _JOINT_RGBA)
-                         for j in range(len(joints))],
-            )  # fmt: skip
+                timestamp=_stamp(ns),
+                frame_id=WORLD,
+                id="skeleton",
+                lines=[
+                    LinePrimitive(
+                        type=LinePrimitiveLineType.LineList, pose=_pose(), thickness=0.02, points=pts, color=_BONE_RGBA
+                    )
+                ]
+                if pts
+                else [],
+                spheres=[
+                    SpherePrimitive(
+                        pose=_pose(pos[j]), size=_vec([0.05] * 3), color=_CONTACT_RGBA if flags[j] else _JOINT_RGBA
+                    )
+                    for j in range(len(joints))
+                ],
+            )
             skel.log(SceneUpdate(entities=[entity]), log_time=ns)
             contacts.log(_contacts_msg(k, joints, flags, clip.objects), log_time=ns)
 

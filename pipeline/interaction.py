@@ -44,10 +44,18 @@ def surface_point_velocity(closest, object_index, poses, object_vel):
     rows = xp.arange(closest.shape[0])[:, None] + 0 * object_index
     pose, vel = poses[rows, object_index], object_vel[rows, object_index]  # (T, K, 7), (T, K, 6)
     R, wb = rotation_rows(pose[..., 3:], xp), vel[..., 3:]
-    ww = xp.stack([R[i][0] * wb[..., 0] + R[i][1] * wb[..., 1] + R[i][2] * wb[..., 2] for i in range(3)], -1)  # R w_body
+    ww = xp.stack(
+        [R[i][0] * wb[..., 0] + R[i][1] * wb[..., 1] + R[i][2] * wb[..., 2] for i in range(3)], -1
+    )  # R w_body
     r = closest - pose[..., :3]
-    cross = xp.stack([ww[..., 1] * r[..., 2] - ww[..., 2] * r[..., 1], ww[..., 2] * r[..., 0] - ww[..., 0] * r[..., 2],
-                      ww[..., 0] * r[..., 1] - ww[..., 1] * r[..., 0]], -1)  # fmt: skip
+    cross = xp.stack(
+        [
+            ww[..., 1] * r[..., 2] - ww[..., 2] * r[..., 1],
+            ww[..., 2] * r[..., 0] - ww[..., 0] * r[..., 2],
+            ww[..., 0] * r[..., 1] - ww[..., 1] * r[..., 0],
+        ],
+        -1,
+    )
     return vel[..., :3] + cross
 
 

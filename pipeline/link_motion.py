@@ -36,7 +36,11 @@ def body_ids(model: mujoco.MjModel, links: tuple[str, ...] | list[str], source: 
     for name in links:
         i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
         if i < 0:
-            raise InputError(source, "links", f"link {name!r} is not a body of the G1 model (e.g. pelvis, torso_link, left_wrist_yaw_link)")
+            raise InputError(
+                source,
+                "links",
+                f"link {name!r} is not a body of the G1 model (e.g. pelvis, torso_link, left_wrist_yaw_link)",
+            )
         ids.append(i)
     return ids
 
@@ -47,7 +51,9 @@ def link_motion(qpos: np.ndarray, qvel: np.ndarray, links: tuple[str, ...], sour
     m = g1_model()
     ids = body_ids(m, links, source)
     if qpos.shape[1:] != (m.nq,) or qvel.shape[1:] != (m.nv,) or len(qpos) != len(qvel):
-        raise InputError(source, "qpos/qvel", f"expected (T, {m.nq}) and (T, {m.nv}), got {qpos.shape} and {qvel.shape}")
+        raise InputError(
+            source, "qpos/qvel", f"expected (T, {m.nq}) and (T, {m.nv}), got {qpos.shape} and {qvel.shape}"
+        )
     d = mujoco.MjData(m)
     T, K = len(qpos), len(ids)
     root_com = m.body_rootid[ids]

@@ -71,11 +71,22 @@ from pipeline.robot import G1_JOINT_NAMES
 from pipeline.scene import Scene, SceneObject, build_scene, link_collision_geoms, nearest_geom_pair
 
 METRIC_KEYS: tuple[str, ...] = (
-    "ground_penetration_frac_1cm", "ground_penetration_max_m", "object_penetration_frac_1cm",
-    "object_penetration_max_m", "float_frac_2cm", "foot_slide_frac_1cm_per_frame", "foot_slide_speed_max_mps",
-    "contact_preservation_frac", "joint_limit_violation_frac", "max_joint_speed_radps", "self_collision_frac",
-    "frames", "fps", "seconds_wall", "frames_per_s",
-)  # fmt: skip
+    "ground_penetration_frac_1cm",
+    "ground_penetration_max_m",
+    "object_penetration_frac_1cm",
+    "object_penetration_max_m",
+    "float_frac_2cm",
+    "foot_slide_frac_1cm_per_frame",
+    "foot_slide_speed_max_mps",
+    "contact_preservation_frac",
+    "joint_limit_violation_frac",
+    "max_joint_speed_radps",
+    "self_collision_frac",
+    "frames",
+    "fps",
+    "seconds_wall",
+    "frames_per_s",
+)
 PENETRATION_TOL = 0.01
 FLOAT_TOL = 0.02
 SLIDE_TOL = 0.01
@@ -88,12 +99,25 @@ _LOWER_BODY_ROOTS = ("pelvis",)
 
 
 def _default_link_map() -> dict[str, str]:
-    m = {"pelvis": "pelvis", "spine1": "torso_link", "spine2": "torso_link", "spine3": "torso_link",
-         "neck": "torso_link", "head": "torso_link"}  # fmt: skip
+    m = {
+        "pelvis": "pelvis",
+        "spine1": "torso_link",
+        "spine2": "torso_link",
+        "spine3": "torso_link",
+        "neck": "torso_link",
+        "head": "torso_link",
+    }
     for s in SIDES:
-        m |= {f"{s}_hip": f"{s}_hip_yaw_link", f"{s}_knee": f"{s}_knee_link", f"{s}_ankle": f"{s}_ankle_roll_link",
-              f"{s}_foot": f"{s}_ankle_roll_link", f"{s}_collar": "torso_link", f"{s}_shoulder": f"{s}_shoulder_pitch_link",
-              f"{s}_elbow": f"{s}_elbow_link", f"{s}_wrist": f"{s}_wrist_yaw_link"}  # fmt: skip
+        m |= {
+            f"{s}_hip": f"{s}_hip_yaw_link",
+            f"{s}_knee": f"{s}_knee_link",
+            f"{s}_ankle": f"{s}_ankle_roll_link",
+            f"{s}_foot": f"{s}_ankle_roll_link",
+            f"{s}_collar": "torso_link",
+            f"{s}_shoulder": f"{s}_shoulder_pitch_link",
+            f"{s}_elbow": f"{s}_elbow_link",
+            f"{s}_wrist": f"{s}_wrist_yaw_link",
+        }
         for f in ("index", "middle", "pinky", "ring", "thumb"):
             m |= {f"{s}_{f}{k}": f"{s}_wrist_yaw_link" for k in (1, 2, 3)}
     return m
@@ -127,18 +151,28 @@ def _subtree(m: mujoco.MjModel, roots: tuple[str, ...], stop: str = "waist_yaw_l
     return out
 
 
-def lowest_points(xpos: np.ndarray, xmat: np.ndarray, gtype: np.ndarray, size: np.ndarray, rbound: np.ndarray) -> np.ndarray:
+def lowest_points(
+    xpos: np.ndarray, xmat: np.ndarray, gtype: np.ndarray, size: np.ndarray, rbound: np.ndarray
+) -> np.ndarray:
     """(..., G) height of each geom's lowest point: sphere ``z - r``, capsule ``z - |a_z| h - r``,
     box ``z - sum_k |R_zk| s_k``, cylinder ``z - |a_z| h - r sqrt(1 - a_z^2)``; others ``z - rbound``."""
     rz = np.abs(xmat[..., 6:9])  # row z of R: world-z component of each local axis
     r, h = size[:, 0], size[:, 1]
     drop = np.select(
-        [gtype == mujoco.mjtGeom.mjGEOM_SPHERE, gtype == mujoco.mjtGeom.mjGEOM_CAPSULE,
-         gtype == mujoco.mjtGeom.mjGEOM_BOX, gtype == mujoco.mjtGeom.mjGEOM_CYLINDER],
-        [np.broadcast_to(r, rz.shape[:-1]), rz[..., 2] * h + r, (rz * size).sum(-1),
-         rz[..., 2] * h + r * np.sqrt(np.clip(1 - rz[..., 2] ** 2, 0, 1))],
+        [
+            gtype == mujoco.mjtGeom.mjGEOM_SPHERE,
+            gtype == mujoco.mjtGeom.mjGEOM_CAPSULE,
+            gtype == mujoco.mjtGeom.mjGEOM_BOX,
+            gtype == mujoco.mjtGeom.mjGEOM_CYLINDER,
+        ],
+        [
+            np.broadcast_to(r, rz.shape[:-1]),
+            rz[..., 2] * h + r,
+            (rz * size).sum(-1),
+            rz[..., 2] * h + r * np.sqrt(np.clip(1 - rz[..., 2] ** 2, 0, 1)),
+        ],
         np.broadcast_to(rbound, rz.shape[:-1]),
-    )  # fmt: skip
+    )
     return xpos[..., 2] - drop
 
 
@@ -147,7 +181,9 @@ def _nearest_rows(n_target: int, fps_target: float, n_src: int, fps_src: float) 
     return np.clip(np.rint(np.arange(n_target) / fps_target * fps_src).astype(int), 0, n_src - 1)
 
 
-def _reference_contacts(robot: RobotClip, human: HumanClip | None, link_map: dict[str, str]) -> tuple[np.ndarray, list[str]] | None:
+def _reference_contacts(
+    robot: RobotClip, human: HumanClip | None, link_map: dict[str, str]
+) -> tuple[np.ndarray, list[str]] | None:
     """(T, K) flags over K robot links, from the human (at robot frame times) or the robot's labels."""
     if human is not None:
         names = human.skeleton.joint_names
@@ -213,8 +249,18 @@ def _sweep(robot: RobotClip, refs: tuple[np.ndarray, list[str]] | None, need_sup
     link_geoms = [link_collision_geoms(m, b) for b in links]
     site_ids = [m.site(s).id for s in FOOT_SITES]
     adr = [(sc.object_qpos_adr[o.name], o.pose) for o in robot.objects]
-    out = _Sweep(m, rg, np.empty((T, len(rg), 3)), np.empty((T, len(rg), 9)), np.empty((T, 2, 3)), np.zeros(T),
-                 np.zeros(T), np.zeros(T, bool), np.ones(T, bool), refs is not None and (bool(og) or not flags.any()))  # fmt: skip
+    out = _Sweep(
+        m,
+        rg,
+        np.empty((T, len(rg), 3)),
+        np.empty((T, len(rg), 9)),
+        np.empty((T, 2, 3)),
+        np.zeros(T),
+        np.zeros(T),
+        np.zeros(T, bool),
+        np.ones(T, bool),
+        refs is not None and (bool(og) or not flags.any()),
+    )
     for t in range(T):
         d.qpos[:36] = robot.qpos[t]
         for a, pose in adr:
@@ -225,8 +271,10 @@ def _sweep(robot: RobotClip, refs: tuple[np.ndarray, list[str]] | None, need_sup
         out.obj_depth[t], out.self_depth[t] = _depths(d, kind)
         if need_support and og:
             out.supported[t] = nearest_geom_pair(m, d, lower_geoms, og, 2 * FLOAT_TOL)[0] <= FLOAT_TOL
-        out.preserved[t] = all(bool(og) and nearest_geom_pair(m, d, link_geoms[k], og, 2 * CONTACT_TOL)[0] <= CONTACT_TOL
-                               for k in np.flatnonzero(flags[t]))  # fmt: skip
+        out.preserved[t] = all(
+            bool(og) and nearest_geom_pair(m, d, link_geoms[k], og, 2 * CONTACT_TOL)[0] <= CONTACT_TOL
+            for k in np.flatnonzero(flags[t])
+        )
     return out
 
 
@@ -259,8 +307,13 @@ def joint_metrics(qpos: np.ndarray, fps: float, lower: np.ndarray, upper: np.nda
     return _frac(out), speed
 
 
-def retarget_metrics(robot: RobotClip, human: HumanClip | None = None, *, link_map: dict[str, str] | None = None,
-                     seconds_wall: float | None = None) -> dict:  # fmt: skip
+def retarget_metrics(
+    robot: RobotClip,
+    human: HumanClip | None = None,
+    *,
+    link_map: dict[str, str] | None = None,
+    seconds_wall: float | None = None,
+) -> dict:
     """The quality metrics of ``robot`` (keys :data:`METRIC_KEYS`; see the module doc)."""
     link_map = DEFAULT_LINK_MAP if link_map is None else link_map
     T, fps = robot.frames, robot.fps
@@ -319,12 +372,20 @@ def summarise(per_clip: list[dict]) -> dict:
     wall = np.array([c["seconds_wall"] for c in per_clip], float)
     timed = np.isfinite(wall)
     out["seconds_wall"] = float(wall[timed].sum()) if timed.any() else float("nan")
-    out["frames_per_s"] = float(frames[timed].sum() / wall[timed].sum()) if timed.any() and wall[timed].sum() > 0 else float("nan")
+    out["frames_per_s"] = (
+        float(frames[timed].sum() / wall[timed].sum()) if timed.any() and wall[timed].sum() > 0 else float("nan")
+    )
     return {**{k: out[k] for k in METRIC_KEYS}, "clips": len(per_clip)}
 
 
-def evaluate_file(path: str | Path, *, human_path: str | Path | None = None, object_mesh: str | Path | None = None,
-                  link_map: dict[str, str] | None = None, seconds_wall: float | None = None) -> dict:  # fmt: skip
+def evaluate_file(
+    path: str | Path,
+    *,
+    human_path: str | Path | None = None,
+    object_mesh: str | Path | None = None,
+    link_map: dict[str, str] | None = None,
+    seconds_wall: float | None = None,
+) -> dict:
     """Metrics of a peer's G1 motion file (BeyondMimic/OmniRetarget ``.npz``, GMR ``.pkl``).
 
     ``object_mesh``: the object's mesh (its convex hull collides), needed for object metrics;

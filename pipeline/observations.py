@@ -19,10 +19,26 @@ from pipeline.robot import G1_JOINT_NAMES
 from pipeline.rotations import rotation_from_wxyz
 
 PROPRIO_NAMES: tuple[str, ...] = (
-    tuple(f"q.{j}" for j in G1_JOINT_NAMES) + tuple(f"dq.{j}" for j in G1_JOINT_NAMES) + ("gravity_x", "gravity_y", "gravity_z")
-    + ("ang_vel_x", "ang_vel_y", "ang_vel_z") + tuple(f"last_action.{j}" for j in G1_JOINT_NAMES)
-)  # fmt: skip
-ROOT_COMMAND_NAMES: tuple[str, ...] = ("dpos_x", "dpos_y", "dpos_z", "rot6d_0", "rot6d_1", "rot6d_2", "rot6d_3", "rot6d_4", "rot6d_5", "vel_x", "vel_y", "vel_z")
+    tuple(f"q.{j}" for j in G1_JOINT_NAMES)
+    + tuple(f"dq.{j}" for j in G1_JOINT_NAMES)
+    + ("gravity_x", "gravity_y", "gravity_z")
+    + ("ang_vel_x", "ang_vel_y", "ang_vel_z")
+    + tuple(f"last_action.{j}" for j in G1_JOINT_NAMES)
+)
+ROOT_COMMAND_NAMES: tuple[str, ...] = (
+    "dpos_x",
+    "dpos_y",
+    "dpos_z",
+    "rot6d_0",
+    "rot6d_1",
+    "rot6d_2",
+    "rot6d_3",
+    "rot6d_4",
+    "rot6d_5",
+    "vel_x",
+    "vel_y",
+    "vel_z",
+)
 
 
 def projected_gravity(qpos: np.ndarray) -> np.ndarray:

@@ -35,33 +35,67 @@ from pathlib import Path
 import numpy as np
 
 G1_JOINT_NAMES: tuple[str, ...] = (
-    "left_hip_pitch_joint", "left_hip_roll_joint", "left_hip_yaw_joint", "left_knee_joint",
-    "left_ankle_pitch_joint", "left_ankle_roll_joint",
-    "right_hip_pitch_joint", "right_hip_roll_joint", "right_hip_yaw_joint", "right_knee_joint",
-    "right_ankle_pitch_joint", "right_ankle_roll_joint",
-    "waist_yaw_joint", "waist_roll_joint", "waist_pitch_joint",
-    "left_shoulder_pitch_joint", "left_shoulder_roll_joint", "left_shoulder_yaw_joint", "left_elbow_joint",
-    "left_wrist_roll_joint", "left_wrist_pitch_joint", "left_wrist_yaw_joint",
-    "right_shoulder_pitch_joint", "right_shoulder_roll_joint", "right_shoulder_yaw_joint", "right_elbow_joint",
-    "right_wrist_roll_joint", "right_wrist_pitch_joint", "right_wrist_yaw_joint",
-)  # fmt: skip
+    "left_hip_pitch_joint",
+    "left_hip_roll_joint",
+    "left_hip_yaw_joint",
+    "left_knee_joint",
+    "left_ankle_pitch_joint",
+    "left_ankle_roll_joint",
+    "right_hip_pitch_joint",
+    "right_hip_roll_joint",
+    "right_hip_yaw_joint",
+    "right_knee_joint",
+    "right_ankle_pitch_joint",
+    "right_ankle_roll_joint",
+    "waist_yaw_joint",
+    "waist_roll_joint",
+    "waist_pitch_joint",
+    "left_shoulder_pitch_joint",
+    "left_shoulder_roll_joint",
+    "left_shoulder_yaw_joint",
+    "left_elbow_joint",
+    "left_wrist_roll_joint",
+    "left_wrist_pitch_joint",
+    "left_wrist_yaw_joint",
+    "right_shoulder_pitch_joint",
+    "right_shoulder_roll_joint",
+    "right_shoulder_yaw_joint",
+    "right_elbow_joint",
+    "right_wrist_roll_joint",
+    "right_wrist_pitch_joint",
+    "right_wrist_yaw_joint",
+)
 NUM_JOINTS = len(G1_JOINT_NAMES)
 ROOT_NAMES: tuple[str, ...] = ("root_x", "root_y", "root_z", "root_qw", "root_qx", "root_qy", "root_qz")
 QPOS_NAMES: tuple[str, ...] = ROOT_NAMES + G1_JOINT_NAMES
 
 #: Bodies the DF features and inspection logs refer to (MuJoCo body names in g1.xml).
 G1_LINK_NAMES: tuple[str, ...] = (
-    "pelvis", "torso_link",
-    "left_hip_pitch_link", "left_knee_link", "left_ankle_roll_link",
-    "right_hip_pitch_link", "right_knee_link", "right_ankle_roll_link",
-    "left_shoulder_pitch_link", "left_elbow_link", "left_wrist_yaw_link",
-    "right_shoulder_pitch_link", "right_elbow_link", "right_wrist_yaw_link",
-)  # fmt: skip
+    "pelvis",
+    "torso_link",
+    "left_hip_pitch_link",
+    "left_knee_link",
+    "left_ankle_roll_link",
+    "right_hip_pitch_link",
+    "right_knee_link",
+    "right_ankle_roll_link",
+    "left_shoulder_pitch_link",
+    "left_elbow_link",
+    "left_wrist_yaw_link",
+    "right_shoulder_pitch_link",
+    "right_elbow_link",
+    "right_wrist_yaw_link",
+)
 #: The 7 query bodies of the released LessMimic demo, in its order.
 LESSMIMIC_DEMO_DF_BODIES: tuple[str, ...] = (
-    "left_wrist_yaw_link", "right_wrist_yaw_link", "pelvis", "left_ankle_roll_link",
-    "right_ankle_roll_link", "left_shoulder_pitch_link", "right_shoulder_pitch_link",
-)  # fmt: skip
+    "left_wrist_yaw_link",
+    "right_wrist_yaw_link",
+    "pelvis",
+    "left_ankle_roll_link",
+    "right_ankle_roll_link",
+    "left_shoulder_pitch_link",
+    "right_shoulder_pitch_link",
+)
 
 
 def g1_xml_path() -> Path:

@@ -72,7 +72,9 @@ class Scene:
     def robot_geom_ids(self) -> np.ndarray:
         """Ids of the robot's collision geoms."""
         m = self.model
-        return np.array([g for g in range(m.ngeom) if m.geom_contype[g] and m.body_rootid[m.geom_bodyid[g]] == m.body("pelvis").id])
+        return np.array(
+            [g for g in range(m.ngeom) if m.geom_contype[g] and m.body_rootid[m.geom_bodyid[g]] == m.body("pelvis").id]
+        )
 
 
 RESTITUTION_CONTACT_FREQ = 60.0
@@ -119,8 +121,11 @@ def _primitive_pieces(p: Primitive) -> list[tuple[str, object]]:
     if uniform or (p.kind == "cylinder" and s[0] == s[1]):
         r, h = p.size[0] * s[0], p.size[1] * s[2]
         return [(p.kind, [r, h])]
-    base = (trimesh.creation.cylinder(p.size[0], 2 * p.size[1], sections=48) if p.kind == "cylinder"
-            else trimesh.creation.capsule(2 * p.size[1], p.size[0], count=[24, 24]))  # fmt: skip
+    base = (
+        trimesh.creation.cylinder(p.size[0], 2 * p.size[1], sections=48)
+        if p.kind == "cylinder"
+        else trimesh.creation.capsule(2 * p.size[1], p.size[0], count=[24, 24])
+    )
     base.apply_scale(s)
     return [("mesh", base)]
 
@@ -146,11 +151,17 @@ def _add_object(spec: mujoco.MjSpec, obj: SceneObject) -> None:
             if kind == "mesh":
                 collide.append((_add_mesh_geom(spec, body, f"{obj.name}_col{k}", size, collide=True), size.volume))
             else:
-                g = body.add_geom(name=f"{obj.name}_col{k}", type=getattr(mujoco.mjtGeom, f"mjGEOM_{kind.upper()}"), size=list(size) + [0.0] * (3 - len(size)))
+                g = body.add_geom(
+                    name=f"{obj.name}_col{k}",
+                    type=getattr(mujoco.mjtGeom, f"mjGEOM_{kind.upper()}"),
+                    size=list(size) + [0.0] * (3 - len(size)),
+                )
                 collide.append((g, _volume(kind, size)))
     elif isinstance(geo, Chair):
         for part, box, centre in geo.parts():
-            g = body.add_geom(name=f"{obj.name}_{part}", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(box.size), pos=centre.tolist())
+            g = body.add_geom(
+                name=f"{obj.name}_{part}", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(box.size), pos=centre.tolist()
+            )
             collide.append((g, float(np.prod(box.size)) * 8))
     elif isinstance(geo, MeshGeometry):
         visual = _add_mesh_geom(spec, body, f"{obj.name}_visual", load_mesh(geo.path), collide=False, scale=geo.scale)
@@ -185,7 +196,9 @@ def _volume(kind: str, size) -> float:
     return math.pi * r * r * 2 * h + (4.0 / 3.0 * math.pi * r**3 if kind == "capsule" else 0.0)
 
 
-def build_spec(objects: tuple[SceneObject, ...] | list[SceneObject] = (), profile: str | ActuatorProfile = "mjlab") -> mujoco.MjSpec:
+def build_spec(
+    objects: tuple[SceneObject, ...] | list[SceneObject] = (), profile: str | ActuatorProfile = "mjlab"
+) -> mujoco.MjSpec:
     """G1 + actuators of ``profile`` + floor + ``objects``, as an editable ``MjSpec``."""
     profile = actuator_profile(profile) if isinstance(profile, str) else profile
     names = [o.name for o in objects]
@@ -205,7 +218,9 @@ def build_spec(objects: tuple[SceneObject, ...] | list[SceneObject] = (), profil
     return spec
 
 
-def build_scene(objects: tuple[SceneObject, ...] | list[SceneObject] = (), profile: str | ActuatorProfile = "mjlab") -> Scene:
+def build_scene(
+    objects: tuple[SceneObject, ...] | list[SceneObject] = (), profile: str | ActuatorProfile = "mjlab"
+) -> Scene:
     """Compile :func:`build_spec` and record each object's ``qpos`` address and body id."""
     profile = actuator_profile(profile) if isinstance(profile, str) else profile
     spec = build_spec(objects, profile)
@@ -233,7 +248,11 @@ def link_collision_geoms(model: mujoco.MjModel, body: str) -> list[int]:
         level = [model.body(body).id]
     except KeyError:
         raise ValueError(f"{body!r} is not a body of the model") from None
-    extra = [model.geom(g).id for g in CONTACT_SURFACE_EXTRA.get(body, ()) if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) >= 0]
+    extra = [
+        model.geom(g).id
+        for g in CONTACT_SURFACE_EXTRA.get(body, ())
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) >= 0
+    ]
     while level:
         geoms = [g for g in range(model.ngeom) if model.geom_contype[g] and model.geom_bodyid[g] in level]
         if geoms:
@@ -242,8 +261,14 @@ def link_collision_geoms(model: mujoco.MjModel, body: str) -> list[int]:
     raise ValueError(f"body {body!r} has no collision geoms below it")
 
 
-def nearest_geom_pair(model: mujoco.MjModel, data: mujoco.MjData, geoms_a: list[int], geoms_b: list[int], distmax: float,
-                      fromto: np.ndarray | None = None) -> tuple[float, int, int]:  # fmt: skip
+def nearest_geom_pair(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    geoms_a: list[int],
+    geoms_b: list[int],
+    distmax: float,
+    fromto: np.ndarray | None = None,
+) -> tuple[float, int, int]:
     """``(d, a, b)``: the smallest signed distance (``mj_geomDistance``, < 0 when penetrating) between
     the geom sets and the pair that has it; ``(distmax, -1, -1)`` when every pair is farther.
     ``fromto`` (6,), when given, receives that pair's nearest points (on ``a``, then on ``b``)."""

@@ -63,10 +63,21 @@ class ContactTask(mink.Task):
     ``cost_l = cost w_l``. ``phi_l - gap`` is clipped to ``[-reach, reach]``.
     """
 
-    def __init__(self, model: mujoco.MjModel, links: tuple[str, ...], object_geoms: list[int], *,
-                 cost: float = 5.0, gap: float = 0.01, reach: float = 0.3, lm_damping: float = 0.0):  # fmt: skip
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        links: tuple[str, ...],
+        object_geoms: list[int],
+        *,
+        cost: float = 5.0,
+        gap: float = 0.01,
+        reach: float = 0.3,
+        lm_damping: float = 0.0,
+    ):
         if cost < 0 or reach <= gap or gap < 0:
-            raise ValueError(f"ContactTask: need cost >= 0 and 0 <= gap < reach, got cost {cost}, gap {gap}, reach {reach}")
+            raise ValueError(
+                f"ContactTask: need cost >= 0 and 0 <= gap < reach, got cost {cost}, gap {gap}, reach {reach}"
+            )
         super().__init__(cost=np.zeros(len(links)), gain=1.0, lm_damping=lm_damping)
         self.model, self.links, self.gap, self.reach, self.base_cost = model, tuple(links), gap, reach, cost
         self.link_geoms = [link_collision_geoms(model, b) for b in links]
@@ -133,7 +144,9 @@ class FootClearance:
     foot; in physics it stood at its first pose and was kicked 16 cm).
     """
 
-    def __init__(self, model: mujoco.MjModel, feet: tuple[str, ...], objects: tuple[str, ...], *, margin: float, step: float):
+    def __init__(
+        self, model: mujoco.MjModel, feet: tuple[str, ...], objects: tuple[str, ...], *, margin: float, step: float
+    ):
         if margin <= 0 or step <= 0:
             raise ValueError(f"FootClearance: margin and step must be > 0, got {margin}, {step}")
         self.model, self.margin, self.step = model, margin, step

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.clip import Skeleton
-from retarget.mapping import G1_ROLES, SIDES, Z, Mapping, g1_points, g1_rest, human_points
+from retarget.mapping import G1_ROLES, SIDES, Mapping, Z, g1_points, g1_rest, human_points
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -60,8 +60,9 @@ def _flexion_side(P: dict, mapping: Mapping, side: str, upper: bool, forward: np
     return _unit(beta * _unit(_perp(other, u)) + (1.0 - beta) * forward)
 
 
-def segment_frames(P: dict[str, np.ndarray], mapping: Mapping, up: np.ndarray | None = None,
-                   calibration: bool = True) -> dict[str, np.ndarray]:  # fmt: skip
+def segment_frames(
+    P: dict[str, np.ndarray], mapping: Mapping, up: np.ndarray | None = None, calibration: bool = True
+) -> dict[str, np.ndarray]:
     """Segment frames ``(T, 3, 3)`` from points ``P`` (:func:`human_points` / :func:`g1_points`);
     ``d`` the body's segment direction, ``L, U, F`` = :func:`body_axes`. Thigh, shank ``(d, L)``;
     arm segments ``(d, flexion side)``. With ``calibration`` (a standing pose: trunk upright and
@@ -105,7 +106,9 @@ def rest_positions(joint_pos: np.ndarray, joint_rot: np.ndarray, skeleton: Skele
     rest = np.zeros((len(skeleton.parents), 3))
     for j, p in enumerate(skeleton.parents):
         if p >= 0:
-            rest[j] = rest[p] + np.median(np.einsum("tba,tb->ta", joint_rot[:, p], joint_pos[:, j] - joint_pos[:, p]), axis=0)
+            rest[j] = rest[p] + np.median(
+                np.einsum("tba,tb->ta", joint_rot[:, p], joint_pos[:, j] - joint_pos[:, p]), axis=0
+            )
     return rest
 
 
@@ -122,11 +125,17 @@ def standing_frame(joint_pos: np.ndarray, skeleton: Skeleton, mapping: Mapping) 
     ankles = [P[mapping.body_of_kind("foot", s)] for s in SIDES]
     leg = max(float(np.median(np.linalg.norm(P["pelvis"] - ankles[0], axis=-1))), 1e-6)
     trunk = _unit(P["torso_link"] - P["pelvis"])[:, 2]
-    score = -_cosines(P, mapping, ("thigh", "shank"), Z).sum(axis=(1, 2)) + 2 * trunk - 5 * np.abs(ankles[0][:, 2] - ankles[1][:, 2]) / leg
+    score = (
+        -_cosines(P, mapping, ("thigh", "shank"), Z).sum(axis=(1, 2))
+        + 2 * trunk
+        - 5 * np.abs(ankles[0][:, 2] - ankles[1][:, 2]) / leg
+    )
     return int(np.argmax(score))
 
 
-def reference_pose(joint_pos: np.ndarray, joint_rot: np.ndarray | None, skeleton: Skeleton, mapping: Mapping) -> Reference:
+def reference_pose(
+    joint_pos: np.ndarray, joint_rot: np.ndarray | None, skeleton: Skeleton, mapping: Mapping
+) -> Reference:
     """The rest pose (:func:`rest_positions`) when it stands (thighs and shanks within 37 degrees
     of its own pelvis -> chest axis reversed, feet within 37 degrees of level: SMPL, OMOMO, PyMO
     T-poses), else the clip's :func:`standing_frame` with world up (LAFAN1's zero-rotation pose is
@@ -135,14 +144,17 @@ def reference_pose(joint_pos: np.ndarray, joint_rot: np.ndarray | None, skeleton
         rest = rest_positions(joint_pos, joint_rot, skeleton)
         P = human_points(rest[None], skeleton, mapping)
         U = body_axes(P, mapping)[1]
-        if (_cosines(P, mapping, ("thigh", "shank"), U) < -0.8).all() and (np.abs(_cosines(P, mapping, ("foot",), U)) < 0.6).all():
+        if (_cosines(P, mapping, ("thigh", "shank"), U) < -0.8).all() and (
+            np.abs(_cosines(P, mapping, ("foot",), U)) < 0.6
+        ).all():
             return Reference(rest, np.broadcast_to(np.eye(3), (len(rest), 3, 3)), None, "rest pose")
     t = standing_frame(joint_pos, skeleton, mapping)
     return Reference(joint_pos[t], None if joint_rot is None else joint_rot[t], Z, f"frame {t}")
 
 
-def driver_rotations(joint_pos: np.ndarray, joint_rot: np.ndarray | None, skeleton: Skeleton,
-                     mapping: Mapping) -> dict[str, np.ndarray]:  # fmt: skip
+def driver_rotations(
+    joint_pos: np.ndarray, joint_rot: np.ndarray | None, skeleton: Skeleton, mapping: Mapping
+) -> dict[str, np.ndarray]:
     """``D_k(t)`` ``(T, 3, 3)`` per body: the driving joint's global rotation, or without
     orientations the frame from positions (:func:`segment_frames`, ``calibration=False``)."""
     if joint_rot is not None:
@@ -150,8 +162,9 @@ def driver_rotations(joint_pos: np.ndarray, joint_rot: np.ndarray | None, skelet
     return segment_frames(human_points(joint_pos, skeleton, mapping), mapping, None, calibration=False)
 
 
-def rotation_offsets(ref: Reference, skeleton: Skeleton, mapping: Mapping,
-                     sole_up: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:  # fmt: skip
+def rotation_offsets(
+    ref: Reference, skeleton: Skeleton, mapping: Mapping, sole_up: dict[str, np.ndarray] | None = None
+) -> dict[str, np.ndarray]:
     """``O_k = D_k(ref)^T G_h,k(ref) G_r,k^T R_r,k`` per body ``(3, 3)`` (module doc).
 
     ``sole_up[foot]``: the sole's normal in the foot driver's own frame, measured where the foot

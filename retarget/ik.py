@@ -47,9 +47,9 @@ import mujoco
 import numpy as np
 
 from pipeline.errors import InputError, first_bad_frame
+from pipeline.ik_limits import FloorLimit, FrameVelocityLimit, SeparationLimit
 from pipeline.robot import default_qpos
 from pipeline.scene import Scene
-from pipeline.ik_limits import FloorLimit, FrameVelocityLimit, SeparationLimit
 from retarget.contact import ContactTask, FootClearance, contact_ramp, hold_resting
 from retarget.ik_config import (
     FOOT_BODIES,
@@ -86,9 +86,13 @@ class G1Retargeter:
         self.sole = {b: sole_offset(m, b) for b in FOOT_BODIES}
         self.posture = mink.PostureTask(m, cost=cfg.posture_cost)
         self.posture.set_target(self.q_default)
-        self.pin_tasks = {b: mink.FrameTask(b, "body", cfg.foot_pin_position_cost, cfg.foot_pin_orientation_cost) for b in FOOT_BODIES}
+        self.pin_tasks = {
+            b: mink.FrameTask(b, "body", cfg.foot_pin_position_cost, cfg.foot_pin_orientation_cost) for b in FOOT_BODIES
+        }
         self.config_limit = mink.ConfigurationLimit(m, gain=cfg.configuration_limit_gain)
-        self.velocity_limit = FrameVelocityLimit(m, joint_velocity_limits(cfg.velocity_limit_factor), dt=1.0 / 30.0, root_speed=cfg.root_speed_limit)
+        self.velocity_limit = FrameVelocityLimit(
+            m, joint_velocity_limits(cfg.velocity_limit_factor), dt=1.0 / 30.0, root_speed=cfg.root_speed_limit
+        )
         self._robot_geoms = robot_collision_geoms(m)
         self._object_geoms = object_collision_geoms(m, scene)
         self.collision_limits = self._collision_limits()
@@ -98,7 +102,9 @@ class G1Retargeter:
 
     # --- public API -------------------------------------------------------------------------------
 
-    def retarget(self, targets: IKTargets, objects_pose: dict[str, np.ndarray] | None = None, source: str = "<memory>") -> np.ndarray:
+    def retarget(
+        self, targets: IKTargets, objects_pose: dict[str, np.ndarray] | None = None, source: str = "<memory>"
+    ) -> np.ndarray:
         """``(T, 36)`` G1 ``qpos`` following ``targets``; objects at ``objects_pose[name]`` ``(T, 7)``.
 
         Raises :class:`~pipeline.errors.InputError` (naming ``source`` and the frame) on non-finite
@@ -108,15 +114,28 @@ class G1Retargeter:
         objects_pose = self._check_inputs(targets, objects_pose or {}, source)
         tasks = self._body_tasks(targets)
         contact_task, contact_w = self._contact_task(targets)
-        contact = targets.foot_contact if (targets.foot_contact is not None and cfg.pin_feet) else np.zeros((T, 2), bool)
-        clearance = (FootClearance(self.model, FOOT_BODIES, tuple(objects_pose), margin=cfg.clearance_margin,
-                                   step=cfg.clearance_speed / targets.fps) if objects_pose else None)  # fmt: skip
+        contact = (
+            targets.foot_contact if (targets.foot_contact is not None and cfg.pin_feet) else np.zeros((T, 2), bool)
+        )
+        clearance = (
+            FootClearance(
+                self.model,
+                FOOT_BODIES,
+                tuple(objects_pose),
+                margin=cfg.clearance_margin,
+                step=cfg.clearance_speed / targets.fps,
+            )
+            if objects_pose
+            else None
+        )
         self._objects_in, self.objects_pose = objects_pose, {name: pose.copy() for name, pose in objects_pose.items()}
         feet_idx = [targets.body_names.index(b) if b in targets.body_names else None for b in FOOT_BODIES]
         self.velocity_limit.dt = 1.0 / targets.fps
         pins: list[np.ndarray | None] = [None, None]
         norm = np.linalg.norm(targets.quat, axis=-1, keepdims=True)
-        unit = np.where(norm > 1e-9, targets.quat / np.maximum(norm, 1e-9), np.array([1.0, 0.0, 0.0, 0.0]))  # zero rows: rot_weight 0
+        unit = np.where(
+            norm > 1e-9, targets.quat / np.maximum(norm, 1e-9), np.array([1.0, 0.0, 0.0, 0.0])
+        )  # zero rows: rot_weight 0
         poses = np.concatenate([unit, targets.pos], axis=-1)
         out = np.empty((T, self.model.nq))
         solves, t0 = 0, time.perf_counter()
@@ -149,22 +168,37 @@ class G1Retargeter:
             for name in self.objects_pose:
                 self.objects_pose[name] = hold_resting(objects_pose[name], self.objects_pose[name], targets.fps)
         dt = time.perf_counter() - t0
-        self.stats = {"frames": T, "qp_solves": solves, "relaxed_steps": self._relaxed_steps, "failed_steps": self._failed_steps,
-                      "seconds": dt, "frames_per_s": T / dt if dt > 0 else float("inf")}  # fmt: skip
+        self.stats = {
+            "frames": T,
+            "qp_solves": solves,
+            "relaxed_steps": self._relaxed_steps,
+            "failed_steps": self._failed_steps,
+            "seconds": dt,
+            "frames_per_s": T / dt if dt > 0 else float("inf"),
+        }
         return out
 
     # --- internals ----------------------------------------------------------------------------------
 
     def _place_objects(self, t: int, clearance: FootClearance | None) -> None:
-        """Move the mocap objects to frame ``t``'s pose (plus the clearance offset) and record it in ``objects_pose``."""
+        """Move the mocap objects to frame ``t``'s pose (plus the clearance offset) and record it in
+        ``objects_pose``."""
         for name, pose in self.objects_pose.items():  # every name is a free (mocap) object: _check_inputs
             if clearance is not None:
                 pose[t, :3] = self._objects_in[name][t, :3] + clearance.offset[name]
             self.configuration.data.mocap_pos[self._mocap[name]] = pose[t, :3]
             self.configuration.data.mocap_quat[self._mocap[name]] = pose[t, 3:]
 
-    def _frame_tasks(self, targets: IKTargets, t: int, tasks: list, poses: np.ndarray, contact: np.ndarray,
-                     pins: list, feet_idx: list) -> list:  # fmt: skip
+    def _frame_tasks(
+        self,
+        targets: IKTargets,
+        t: int,
+        tasks: list,
+        poses: np.ndarray,
+        contact: np.ndarray,
+        pins: list,
+        feet_idx: list,
+    ) -> list:
         """Frame ``t``'s tasks: body targets, a pin replacing the target of each foot in contact, the posture.
 
         ``pins`` (per foot, updated in place) holds the contact's onset frame, the pinned position with
@@ -198,8 +232,14 @@ class G1Retargeter:
         if flags is None or not flags.any() or not self._object_geoms:
             return None, None
         cfg = self.config
-        task = ContactTask(self.model, targets.contact_links, self._object_geoms, cost=cfg.contact_cost, gap=cfg.contact_gap,
-                           reach=cfg.contact_reach)  # fmt: skip
+        task = ContactTask(
+            self.model,
+            targets.contact_links,
+            self._object_geoms,
+            cost=cfg.contact_cost,
+            gap=cfg.contact_gap,
+            reach=cfg.contact_reach,
+        )
         return task, contact_ramp(flags, int(round(cfg.contact_ramp_s * targets.fps)))
 
     def _collision_limits(self) -> list[FloorLimit | SeparationLimit]:
@@ -214,13 +254,21 @@ class G1Retargeter:
         ]
         others = [g for g in robot if g not in round_]
         if others:
-            limits.append(SeparationLimit(m, [(others, [floor])], minimum_distance_from_collisions=cfg.floor_min_distance, **kw))
+            limits.append(
+                SeparationLimit(m, [(others, [floor])], minimum_distance_from_collisions=cfg.floor_min_distance, **kw)
+            )
         objects = self._object_geoms
         if objects:
-            limits.append(SeparationLimit(m, [(robot, objects)], minimum_distance_from_collisions=cfg.object_min_distance, **kw))
+            limits.append(
+                SeparationLimit(m, [(robot, objects)], minimum_distance_from_collisions=cfg.object_min_distance, **kw)
+            )
         if cfg.self_collision:
             pairs = self_collision_groups(m)
-            limits.append(SeparationLimit(m, pairs, skip_kept_apart=True, minimum_distance_from_collisions=cfg.self_min_distance, **kw))
+            limits.append(
+                SeparationLimit(
+                    m, pairs, skip_kept_apart=True, minimum_distance_from_collisions=cfg.self_min_distance, **kw
+                )
+            )
         return limits
 
     def _check_inputs(self, targets: IKTargets, objects_pose: dict, source: str) -> dict[str, np.ndarray]:
@@ -230,8 +278,9 @@ class G1Retargeter:
                 raise InputError(source, field, "is NaN or infinite", frame=first_bad_frame(bad))
         zero = (np.linalg.norm(targets.quat, axis=-1) < 1e-9) & (targets.rot_weight > 0)
         if zero.any():
-            raise InputError(source, "IK target quat", "zero quaternion for a body with rot_weight > 0",
-                             frame=first_bad_frame(zero))  # fmt: skip
+            raise InputError(
+                source, "IK target quat", "zero quaternion for a body with rot_weight > 0", frame=first_bad_frame(zero)
+            )
         unknown = sorted(set(targets.body_names) - {self.model.body(i).name for i in range(self.model.nbody)})
         if unknown:
             raise ValueError(f"IK targets name bodies {unknown} that the G1 model does not have")
@@ -256,7 +305,8 @@ class G1Retargeter:
         ]
 
     def _initial_qpos(self, targets: IKTargets) -> np.ndarray:
-        """Default joints; root at the target pelvis position and heading (hips' or shoulders' if no pelvis orientation).
+        """Default joints; root at the target pelvis position and heading (hips' or shoulders' if no pelvis
+        orientation).
 
         The root is then raised until no robot geom is below the floor.
         """
@@ -270,7 +320,10 @@ class G1Retargeter:
         if "pelvis" in names and targets.rot_weight[names.index("pelvis")] > 0:
             yaw = _yaw_of(targets.quat[0, names.index("pelvis")])
         else:
-            for left, right in (("left_hip_pitch_link", "right_hip_pitch_link"), ("left_shoulder_pitch_link", "right_shoulder_pitch_link")):
+            for left, right in (
+                ("left_hip_pitch_link", "right_hip_pitch_link"),
+                ("left_shoulder_pitch_link", "right_shoulder_pitch_link"),
+            ):
                 if left in names and right in names:
                     lateral = targets.pos[0, names.index(left)] - targets.pos[0, names.index(right)]
                     yaw = math.atan2(lateral[1], lateral[0]) - math.pi / 2  # x forward = y lateral turned by -90 deg
@@ -304,17 +357,22 @@ class G1Retargeter:
         return max_iterations
 
     def _step(self, tasks: list, limits: list) -> np.ndarray:
-        """One QP step ``dq`` (``limits=`` by keyword: mink 1.3.0 takes a positional 6th argument as ``safety_break``)."""
+        """One QP step ``dq`` (``limits=`` by keyword: mink 1.3.0 takes a positional 6th argument as
+        ``safety_break``)."""
         cfg = self.config
         try:
-            return mink.solve_ik(self.configuration, tasks, 1.0, cfg.solver, damping=cfg.damping, safety_break=False, limits=limits)
+            return mink.solve_ik(
+                self.configuration, tasks, 1.0, cfg.solver, damping=cfg.damping, safety_break=False, limits=limits
+            )
         except mink.NoSolutionFound:
             pass  # collision push-out may conflict with the speed limit: retry never requiring motion
         for lim in self.collision_limits:
             lim.relaxed = True
         try:
             self._relaxed_steps += 1
-            return mink.solve_ik(self.configuration, tasks, 1.0, cfg.solver, damping=cfg.damping, safety_break=False, limits=limits)
+            return mink.solve_ik(
+                self.configuration, tasks, 1.0, cfg.solver, damping=cfg.damping, safety_break=False, limits=limits
+            )
         except mink.NoSolutionFound:
             self._failed_steps += 1  # dq = 0 is feasible for the relaxed limits; the solver still failed: stay put
             return np.zeros(self.model.nv)
@@ -357,8 +415,12 @@ def targets_from_qpos(
         mujoco.mj_kinematics(model, data)
         pos[t], quat[t] = data.xpos[ids], data.xquat[ids]
     return IKTargets(
-        body_names=tuple(body_names), pos=pos, quat=quat,
+        body_names=tuple(body_names),
+        pos=pos,
+        quat=quat,
         pos_weight=np.broadcast_to(np.asarray(pos_weight, float), (K,)).copy(),
         rot_weight=np.broadcast_to(np.asarray(rot_weight, float), (K,)).copy(),
-        fps=float(fps), scale=1.0, foot_contact=foot_contact,
-    )  # fmt: skip
+        fps=float(fps),
+        scale=1.0,
+        foot_contact=foot_contact,
+    )

@@ -104,7 +104,9 @@ class IKConfig:
 
     def __post_init__(self):
         if self.iterations < 1 or self.init_iterations < 1:
-            raise ValueError(f"IKConfig: iterations ({self.iterations}) and init_iterations ({self.init_iterations}) must be >= 1")
+            raise ValueError(
+                f"IKConfig: iterations ({self.iterations}) and init_iterations ({self.init_iterations}) must be >= 1"
+            )
         if not 0.0 < self.root_speed_limit:
             raise ValueError(f"IKConfig: root_speed_limit must be > 0, got {self.root_speed_limit}")
         if not 0.0 < self.velocity_limit_factor:

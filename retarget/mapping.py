@@ -84,8 +84,12 @@ class BodyRole:
 
 
 def _g1_roles() -> dict[str, BodyRole]:
-    roles = {"pelvis": BodyRole("pelvis", None, "leg", "pelvis", ("torso_link",)),
-             "torso_link": BodyRole("torso", None, "trunk", "torso_link", ("left_shoulder_roll_link", "right_shoulder_roll_link"))}  # fmt: skip
+    roles = {
+        "pelvis": BodyRole("pelvis", None, "leg", "pelvis", ("torso_link",)),
+        "torso_link": BodyRole(
+            "torso", None, "trunk", "torso_link", ("left_shoulder_roll_link", "right_shoulder_roll_link")
+        ),
+    }
     for s in SIDES:
         hip = f"{s}_hip_pitch_link"
         roles[hip] = BodyRole("thigh", s, "leg", "pelvis", (f"{s}_knee_link",))
@@ -101,7 +105,9 @@ def _g1_roles() -> dict[str, BodyRole]:
 #: Every G1 body a mapping file may drive, and its part.
 G1_ROLES: dict[str, BodyRole] = _g1_roles()
 #: Bodies every mapping must drive (pelvis frame, floor and leg scale need them).
-CORE_BODIES = ("pelvis", "torso_link") + tuple(f"{s}_{b}" for s in SIDES for b in ("hip_pitch_link", "knee_link", "ankle_roll_link"))
+CORE_BODIES = ("pelvis", "torso_link") + tuple(
+    f"{s}_{b}" for s in SIDES for b in ("hip_pitch_link", "knee_link", "ankle_roll_link")
+)
 
 
 @dataclass(frozen=True)
@@ -188,17 +194,27 @@ def read_spec(path: Path) -> dict:
         for w in ("pos_weight", "rot_weight"):
             if not isinstance(e.get(w), (int, float)) or not np.isfinite(e[w]) or e[w] < 0:
                 raise InputError(path, f"{where}.{w}", f"must be a non-negative number, got {e.get(w)!r}")
-        links[body] = {"joint": _names(e.get("joint"), path, f"{where}.joint"), "aim": _names(e.get("aim"), path, f"{where}.aim"),
-                       "pos_weight": float(e["pos_weight"]), "rot_weight": float(e["rot_weight"])}  # fmt: skip
+        links[body] = {
+            "joint": _names(e.get("joint"), path, f"{where}.joint"),
+            "aim": _names(e.get("aim"), path, f"{where}.aim"),
+            "pos_weight": float(e["pos_weight"]),
+            "rot_weight": float(e["rot_weight"]),
+        }
     missing = [b for b in CORE_BODIES if b not in links]
     if missing:
         raise InputError(path, "links", f"must drive {', '.join(missing)} (pelvis, torso and both legs are needed)")
     roles = [G1_ROLES[b] for b in links]
     hanging = {r.side for r in roles if r.group == "arm"} - {r.side for r in roles if r.kind == "upper_arm"}
     if hanging:
-        raise InputError(path, "links", f"the {', '.join(sorted(hanging))} elbow/wrist need a shoulder link to hang from")
-    return {"name": str(spec.get("name", Path(path).stem)), "description": str(spec.get("description", "")),
-            "required": tuple(_names(spec.get("required"), path, "required")), "links": links}  # fmt: skip
+        raise InputError(
+            path, "links", f"the {', '.join(sorted(hanging))} elbow/wrist need a shoulder link to hang from"
+        )
+    return {
+        "name": str(spec.get("name", Path(path).stem)),
+        "description": str(spec.get("description", "")),
+        "required": tuple(_names(spec.get("required"), path, "required")),
+        "links": links,
+    }
 
 
 def mapping_files() -> list[Path]:
@@ -233,14 +249,22 @@ def load_mapping(skeleton: Skeleton, explicit: str | None = None, *, source: str
     if explicit is not None:
         path = Path(explicit) if Path(explicit).suffix == ".json" else MAPPINGS_DIR / f"{explicit}.json"
         if not path.is_file():
-            raise InputError(source, "mapping", f"no mapping file {explicit!r} ({path}); shipped: {', '.join(p.stem for p in paths)}")
+            raise InputError(
+                source, "mapping", f"no mapping file {explicit!r} ({path}); shipped: {', '.join(p.stem for p in paths)}"
+            )
         paths = [path]
     names, tried = set(skeleton.joint_names), []
     for path in paths:
         result = _resolve(read_spec(path), path, names)
         if isinstance(result, Mapping):
             return result
-        tried.append(f"{path.name} (missing {', '.join(result[:6])}{f' and {len(result) - 6} more' if len(result) > 6 else ''})")
-    raise InputError(source, "skeleton", f"no joint mapping fits this skeleton; it has {len(names)} joints: "
-                     f"{', '.join(skeleton.joint_names)}; tried {'; '.join(tried)}; add a mapping file to "
-                     f"{MAPPINGS_DIR} or pass one explicitly")  # fmt: skip
+        tried.append(
+            f"{path.name} (missing {', '.join(result[:6])}{f' and {len(result) - 6} more' if len(result) > 6 else ''})"
+        )
+    raise InputError(
+        source,
+        "skeleton",
+        f"no joint mapping fits this skeleton; it has {len(names)} joints: "
+        f"{', '.join(skeleton.joint_names)}; tried {'; '.join(tried)}; add a mapping file to "
+        f"{MAPPINGS_DIR} or pass one explicitly",
+    )

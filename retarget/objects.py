@@ -96,8 +96,11 @@ def _map_track(o: ObjectTrack, clip: HumanClip, info: ScaleInfo, anchors) -> Obj
     human's sat relative to them."""
     p, T, fps = o.pose[:, :3], o.frames, clip.fps
     ah, ar, dh, dr, anchored = anchors
-    touched = o.contact if o.contact is not None else (
-        clip.contacts.any(axis=1) if clip.contacts is not None else np.zeros(T, bool))  # fmt: skip
+    touched = (
+        o.contact
+        if o.contact is not None
+        else (clip.contacts.any(axis=1) if clip.contacts is not None else np.zeros(T, bool))
+    )
     speed = np.linalg.norm(np.gradient(p, axis=0), axis=1) * fps
     n = max(1, int(round(0.1 * fps)))
     w = _smooth(touched & anchored, n) * np.clip(_smooth(speed, n) / MOVING_SPEED, 0.0, 1.0)
@@ -130,6 +133,8 @@ def map_objects(clip: HumanClip, scale_info: ScaleInfo, targets: IKTargets | Non
     if not clip.objects:
         return ()
     if targets is None:
-        targets = human_to_targets(clip, scale_info.mapping, height_override=scale_info.height_override, scale=scale_info)
+        targets = human_to_targets(
+            clip, scale_info.mapping, height_override=scale_info.height_override, scale=scale_info
+        )
     anchors = _anchors(clip, targets, scale_info.mapping)
     return tuple(_map_track(o, clip, scale_info, anchors) for o in clip.objects)

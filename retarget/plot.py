@@ -42,7 +42,11 @@ def clip_series(robot: RobotClip) -> dict[str, np.ndarray]:
     m, d = scene.model, mujoco.MjData(scene.model)
     feet = [m.site(f"{s}_foot").id for s in SIDES]
     hands = [m.geom(f"{s}_hand_collision").id for s in SIDES]
-    obj_geoms = [g for g in range(m.ngeom) if m.geom_contype[g] and m.body_rootid[m.geom_bodyid[g]] != m.body("pelvis").id and m.geom_bodyid[g] != 0]
+    obj_geoms = [
+        g
+        for g in range(m.ngeom)
+        if m.geom_contype[g] and m.body_rootid[m.geom_bodyid[g]] != m.body("pelvis").id and m.geom_bodyid[g] != 0
+    ]
     T = robot.frames
     foot_z, hand_d = np.zeros((T, 2)), np.full((T, 2), np.nan)
     fromto = np.zeros(6)
@@ -83,6 +87,8 @@ def plot_clip(robot: RobotClip, human: HumanClip, path: Path) -> Path:
     axes[2].set_xlabel("time (s)")
     for ax in axes:
         ax.legend(loc="upper right", fontsize=7)
-    fig.suptitle(f"{robot.source} ({robot.task or 'no task'}){' [SYNTHETIC]' if robot.provenance.get('synthetic') else ''}")
+    fig.suptitle(
+        f"{robot.source} ({robot.task or 'no task'}){' [SYNTHETIC]' if robot.provenance.get('synthetic') else ''}"
+    )
     fig.tight_layout()
     return save_figure(fig, path, dpi=90)

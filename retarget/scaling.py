@@ -80,10 +80,18 @@ class ScaleInfo:
 
     def summary(self) -> dict:
         """Plain numbers for reports."""
-        return {"mapping": self.mapping.name, "subject_height_m": self.subject_height, "height_source": self.height_source,
-                "scale_leg": self.leg, "scale_trunk": self.trunk, "scale_arm": self.arm,
-                "height_ratio": g1_rest().height / self.subject_height, "reference": self.reference.label,
-                "human_m": dict(self.human), "robot_m": dict(self.robot)}  # fmt: skip
+        return {
+            "mapping": self.mapping.name,
+            "subject_height_m": self.subject_height,
+            "height_source": self.height_source,
+            "scale_leg": self.leg,
+            "scale_trunk": self.trunk,
+            "scale_arm": self.arm,
+            "height_ratio": g1_rest().height / self.subject_height,
+            "reference": self.reference.label,
+            "human_m": dict(self.human),
+            "robot_m": dict(self.robot),
+        }
 
 
 def check_clip(clip: HumanClip) -> None:
@@ -92,7 +100,11 @@ def check_clip(clip: HumanClip) -> None:
         raise InputError(clip.source, "joint_pos", f"the clip has {clip.frames} frame; retargeting needs at least 2")
     for o in clip.objects:
         if o.geometry is None:
-            raise InputError(o.source or clip.source, f"object {o.name} geometry", "missing: an object track needs its shape to be retargeted")
+            raise InputError(
+                o.source or clip.source,
+                f"object {o.name} geometry",
+                "missing: an object track needs its shape to be retargeted",
+            )
 
 
 def subject_height(clip: HumanClip, override: float | None = None) -> tuple[float, str]:
@@ -106,11 +118,19 @@ def subject_height(clip: HumanClip, override: float | None = None) -> tuple[floa
     if h is None:
         h, src = estimate_height(clip.joint_pos, clip.skeleton), "estimate"
     if h is None:
-        raise InputError(clip.source, "subject_height", "unknown (none in the clip, no head/ankle joints to estimate it); pass height_override")
+        raise InputError(
+            clip.source,
+            "subject_height",
+            "unknown (none in the clip, no head/ankle joints to estimate it); pass height_override",
+        )
     lo, hi = HEIGHT_RANGE
     if not lo <= h <= hi:
-        raise InputError(clip.source, "subject_height", f"{h:.3f} m ({src}) is outside {lo}-{hi} m (wrong units?); "
-                         "pass height_override if the subject really is that tall")  # fmt: skip
+        raise InputError(
+            clip.source,
+            "subject_height",
+            f"{h:.3f} m ({src}) is outside {lo}-{hi} m (wrong units?); "
+            "pass height_override if the subject really is that tall",
+        )
     return float(h), src
 
 
@@ -140,8 +160,9 @@ def _joint_rotations(clip: HumanClip) -> np.ndarray | None:
     return rotation_from_wxyz(clip.joint_quat.reshape(-1, 4)).as_matrix().reshape(clip.frames, -1, 3, 3)
 
 
-def compute_scale(clip: HumanClip, mapping: Mapping, *, height_override: float | None = None,
-                  _rot: np.ndarray | None = None) -> ScaleInfo:  # fmt: skip
+def compute_scale(
+    clip: HumanClip, mapping: Mapping, *, height_override: float | None = None, _rot: np.ndarray | None = None
+) -> ScaleInfo:
     """The clip's :class:`ScaleInfo` (checks the clip and the subject height first)."""
     check_clip(clip)
     height, src = subject_height(clip, height_override)
@@ -154,13 +175,33 @@ def compute_scale(clip: HumanClip, mapping: Mapping, *, height_override: float |
     levels = {s: float(np.percentile(P[f][:, 2], ANKLE_PERCENTILE)) for s, f in feet.items()}
     robot_ankle = float(np.mean([g1_rest().pos[f][2] for f in feet.values()]))
     x0, y0 = P["pelvis"][0, :2]
-    return ScaleInfo(mapping, height, src, human, robot, float(leg), float(trunk), float(arm),
-                     np.array([x0, y0, np.mean(list(levels.values()))]), np.array([x0, y0, robot_ankle]), levels,
-                     reference_pose(clip.joint_pos, rot, clip.skeleton, mapping), height_override)  # fmt: skip
+    return ScaleInfo(
+        mapping,
+        height,
+        src,
+        human,
+        robot,
+        float(leg),
+        float(trunk),
+        float(arm),
+        np.array([x0, y0, np.mean(list(levels.values()))]),
+        np.array([x0, y0, robot_ankle]),
+        levels,
+        reference_pose(clip.joint_pos, rot, clip.skeleton, mapping),
+        height_override,
+    )
 
 
-def _place(P: dict, rot: dict, info: ScaleInfo, center: np.ndarray, levels: dict, robot_center: np.ndarray,
-           deltas: dict | None = None, robot: dict | None = None) -> tuple[dict, dict]:  # fmt: skip
+def _place(
+    P: dict,
+    rot: dict,
+    info: ScaleInfo,
+    center: np.ndarray,
+    levels: dict,
+    robot_center: np.ndarray,
+    deltas: dict | None = None,
+    robot: dict | None = None,
+) -> tuple[dict, dict]:
     """Target positions per body (the chain in the module doc; a foot's height counts from its own
     side's planted-ankle level ``levels[side]``) and, when ``deltas`` is None, the offsets that
     put frame 0 exactly on ``robot`` (calibration)."""
@@ -211,7 +252,10 @@ def position_offsets(info: ScaleInfo, skel: Skeleton, offsets: dict) -> dict[str
     rot = {b: Q @ D[b] @ offsets[b] for b in mapping.body_names}
     hips = np.mean([Pa[mapping.body_of_kind("thigh", s)][0, 2] for s in SIDES])
     levels = dict.fromkeys(SIDES, float(hips - info.human["leg"]))  # as if the legs were straight
-    center, robot_center = np.array([0.0, 0.0, np.mean(list(levels.values()))]), np.array([0.0, 0.0, info.robot_center[2]])
+    center, robot_center = (
+        np.array([0.0, 0.0, np.mean(list(levels.values()))]),
+        np.array([0.0, 0.0, info.robot_center[2]]),
+    )
     return _place(Pa, rot, info, center, levels, robot_center, None, g1_points(mapping))[1]
 
 
@@ -247,8 +291,9 @@ def sole_normals(D: dict, contact: np.ndarray | None, mapping: Mapping) -> dict[
     return out
 
 
-def human_to_targets(clip: HumanClip, mapping: Mapping, *, height_override: float | None = None,
-                     scale: ScaleInfo | None = None) -> IKTargets:  # fmt: skip
+def human_to_targets(
+    clip: HumanClip, mapping: Mapping, *, height_override: float | None = None, scale: ScaleInfo | None = None
+) -> IKTargets:
     """G1 :class:`IKTargets` for ``clip`` (positions, orientations and weights as in the module
     doc; ``foot_contact`` from the human's feet). ``scale``: a precomputed :class:`ScaleInfo`."""
     rot = _joint_rotations(clip)
@@ -265,8 +310,12 @@ def human_to_targets(clip: HumanClip, mapping: Mapping, *, height_override: floa
     if clip.joint_quat is None:
         rot_w = np.where([G1_ROLES[b].kind in ARM_KINDS for b in bodies], 0.0, rot_w)
     return IKTargets(
-        body_names=bodies, pos=np.stack([pos[b] for b in bodies], axis=1),
+        body_names=bodies,
+        pos=np.stack([pos[b] for b in bodies], axis=1),
         quat=_continuous_quats(np.stack([R[b] for b in bodies], axis=1)),
-        pos_weight=np.array([link.pos_weight for link in mapping.links]), rot_weight=rot_w,
-        fps=clip.fps, scale=info.leg, foot_contact=contact,
-    )  # fmt: skip
+        pos_weight=np.array([link.pos_weight for link in mapping.links]),
+        rot_weight=rot_w,
+        fps=clip.fps,
+        scale=info.leg,
+        foot_contact=contact,
+    )

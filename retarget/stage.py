@@ -51,10 +51,15 @@ def _link_map(clip: HumanClip, mapping) -> dict[str, str]:
     from pipeline.metrics import DEFAULT_LINK_MAP
 
     names = set(clip.skeleton.joint_names)
-    return {**{j: b for j, b in DEFAULT_LINK_MAP.items() if j in names}, **{link.joint: link.body for link in mapping.links}}
+    return {
+        **{j: b for j, b in DEFAULT_LINK_MAP.items() if j in names},
+        **{link.joint: link.body for link in mapping.links},
+    }
 
 
-def retarget_clip(clip: HumanClip, *, height_override: float | None = None, mapping_name: str | None = None) -> tuple[RobotClip, dict, dict]:
+def retarget_clip(
+    clip: HumanClip, *, height_override: float | None = None, mapping_name: str | None = None
+) -> tuple[RobotClip, dict, dict]:
     """(robot clip, metrics, scale summary) for one human clip."""
     from pipeline.metrics import retarget_metrics
     from retarget.contact import link_contact_flags
@@ -79,9 +84,21 @@ def retarget_clip(clip: HumanClip, *, height_override: float | None = None, mapp
     qpos = ik.retarget(targets, {o.name: o.pose for o in objects}, source=human.source)
     objects = tuple(replace(o, pose=ik.objects_pose[o.name]) for o in objects)  # moved clear of planted feet
     robot = RobotClip(
-        qpos, FPS, human.source, objects=objects, contact_links=links, contacts=contacts, method=METHOD, task=human.task,
-        provenance={"source": human.source, "synthetic": human.synthetic, "mapping": mapping.name, "source_fps": clip.fps},
-    )  # fmt: skip
+        qpos,
+        FPS,
+        human.source,
+        objects=objects,
+        contact_links=links,
+        contacts=contacts,
+        method=METHOD,
+        task=human.task,
+        provenance={
+            "source": human.source,
+            "synthetic": human.synthetic,
+            "mapping": mapping.name,
+            "source_fps": clip.fps,
+        },
+    )
     seconds = time.perf_counter() - t0
     return robot, retarget_metrics(robot, human, link_map=link_map, seconds_wall=seconds), info.summary()
 
@@ -110,7 +127,9 @@ def _run_one(args: tuple[int, HumanClip, Path, float | None]) -> ClipResult:
     return result
 
 
-def retarget_clips(clips: list[HumanClip], work: Path, *, jobs: int = 1, height_override: float | None = None) -> list[ClipResult]:
+def retarget_clips(
+    clips: list[HumanClip], work: Path, *, jobs: int = 1, height_override: float | None = None
+) -> list[ClipResult]:
     """Retarget every clip (in ``jobs`` processes), resuming from the cache in ``work``."""
     work.mkdir(parents=True, exist_ok=True)
     tasks = [(i, c, work, height_override) for i, c in enumerate(clips)]
@@ -130,25 +149,33 @@ def retarget_clips(clips: list[HumanClip], work: Path, *, jobs: int = 1, height_
 
 
 CARD_NOTES = [
-    "`observation.state` is the G1 `qpos` (36): root position, root quaternion wxyz, 29 joint angles in mjlab's joint order "
-    "(names in `meta/info.json`); `observation.qvel` (35) its finite differences.",
+    "`observation.state` is the G1 `qpos` (36): root position, root quaternion wxyz, 29 joint angles in mjlab's "
+    "joint order (names in `meta/info.json`); `observation.qvel` (35) its finite differences.",
     "`contact` labels, per robot link, the frames where the human touches an object (a human joint within 2 cm of the "
-    "object surface) with a joint mapped to that link; the retargeting brings the link to the object surface on those frames.",
+    "object surface) with a joint mapped to that link; the retargeting brings the link to the object surface on those "
+    "frames.",
     "`object.<name>.pose` is each object's pose (position, quaternion wxyz) in the robot's world: real size, placement "
     "following the scaled interaction, moved clear of the robot's planted feet where needed.",
     "`source_frame` is the index of the nearest frame of the source take (at the take's own frame rate).",
-    "Per-clip quality figures (penetration, floating, foot sliding, contact preservation, joint limits and speed) are in "
-    "`report.json` next to the dataset; kinematic only: physical validity is measured by the physicalize stage.",
+    "Per-clip quality figures (penetration, floating, foot sliding, contact preservation, joint limits and speed) "
+    "are in `report.json` next to the dataset; kinematic only: physical validity is measured by the physicalize "
+    "stage.",
 ]
 
 
 def _feature_frames(features) -> dict[str, str]:
-    frames = {"observation.state": "world, z-up (root); joint space", "observation.qvel": "world (root linear), root body (angular)",
-              "contact": "per link", "source_frame": "source take"}  # fmt: skip
+    frames = {
+        "observation.state": "world, z-up (root); joint space",
+        "observation.qvel": "world (root linear), root body (angular)",
+        "contact": "per link",
+        "source_frame": "source take",
+    }
     return {f.name: frames.get(f.name, "world, z-up" if f.name.endswith(".pose") else "") for f in features}
 
 
-def input_fingerprint(input_path: str | None, *, body_model: str | None = None, height_override: float | None = None) -> str:
+def input_fingerprint(
+    input_path: str | None, *, body_model: str | None = None, height_override: float | None = None
+) -> str:
     """What a run's output depends on (:mod:`pipeline.stage_state`): every input file's path, size and
     mtime (the embedded default: its generator's source code), the body model's, and the height
     override; not ``jobs``, which changes only the speed."""
@@ -161,11 +188,20 @@ def input_fingerprint(input_path: str | None, *, body_model: str | None = None, 
     else:
         source = files_fingerprint([input_path])
     body = files_fingerprint([body_model]) if body_model else None
-    return fingerprint(stage="retargeted", method=METHOD, fps=FPS, input=source, body_model=body, height=height_override)
+    return fingerprint(
+        stage="retargeted", method=METHOD, fps=FPS, input=source, body_model=body, height=height_override
+    )
 
 
-def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, jobs: int = 1, body_model: str | None = None,
-              height_override: float | None = None) -> dict:  # fmt: skip
+def run_stage(
+    input_path: str | None,
+    name: str,
+    *,
+    overwrite: bool = False,
+    jobs: int = 1,
+    body_model: str | None = None,
+    height_override: float | None = None,
+) -> dict:
     """``lessmimic retarget``: ingest, retarget every clip, write the dataset, report and logs. Without
     ``overwrite``, an existing dataset whose report records this run's :func:`input_fingerprint` is up
     to date: its report comes back with ``"up_to_date": True`` and nothing is done."""
@@ -196,26 +232,39 @@ def run_stage(input_path: str | None, name: str, *, overwrite: bool = False, job
     for r in failed:
         print(f"error: {r['error']}")
     report = {
-        "stage": "retargeted", "method": METHOD, "fps": FPS, "input": input_path or "embedded synthetic default",
+        "stage": "retargeted",
+        "method": METHOD,
+        "fps": FPS,
+        "input": input_path or "embedded synthetic default",
         "clips": [{"source": r.source, "task": r.robot.task, **r.metrics, "scale": r.scale} for r in done],
-        "failed": failed, "summary": summarise([r.metrics for r in done]) if done else {}, KEY: fp,
-    }  # fmt: skip
+        "failed": failed,
+        "summary": summarise([r.metrics for r in done]) if done else {},
+        KEY: fp,
+    }
     if done:
         synthetic = any(r.robot.provenance.get("synthetic") for r in done)
         features, episodes = robot_clips_to_episodes([r.robot for r in done])
         card = DatasetCard(
             title=f"{name}: G1 retargeted motion",
             description=("SYNTHETIC human-object demonstrations, " if synthetic else "Human(-object) motion capture, ")
-            + "retargeted to the Unitree G1 by interaction-preserving mink IK (kinematic: not yet physically simulated).",
-            provenance=[r.source for r in done], fps=FPS, synthetic=synthetic, stage="retargeted",
-            license="apache-2.0" if synthetic else "other", feature_frames=_feature_frames(features), notes=CARD_NOTES,
-        )  # fmt: skip
+            + "retargeted to the Unitree G1 by interaction-preserving mink IK (kinematic: not yet physically "
+            "simulated).",
+            provenance=[r.source for r in done],
+            fps=FPS,
+            synthetic=synthetic,
+            stage="retargeted",
+            license="apache-2.0" if synthetic else "other",
+            feature_frames=_feature_frames(features),
+            notes=CARD_NOTES,
+        )
         write_dataset(out, f"lessmimic/{name}-retargeted", FPS, features, episodes, card=card, overwrite=overwrite)
         logs = out.parent / "logs" / "retargeted"
         for k, r in enumerate(tqdm(done, desc="logs and plots", unit="clip")):
             stem = f"{k:03d}_{file_stem(r.source)}"
             write_robot_log(r.robot, logs / f"{stem}.mcap")
             plot_clip(r.robot, human.clips[r.index].resampled(FPS), logs / f"{stem}.png")
-        write_json_atomic(out / "report.json", {**report, "seconds_wall": time.perf_counter() - t0})  # last: its fingerprint marks a finished run
+        write_json_atomic(
+            out / "report.json", {**report, "seconds_wall": time.perf_counter() - t0}
+        )  # last: its fingerprint marks a finished run
         shutil.rmtree(work, ignore_errors=True)  # finished: the resume cache has served its purpose
     return report

@@ -39,13 +39,17 @@ class IKTargets:
     def __post_init__(self):
         T, K = self.pos.shape[:2]
         if self.pos.shape != (T, K, 3) or self.quat.shape != (T, K, 4) or K != len(self.body_names):
-            raise ValueError(f"IKTargets: pos {self.pos.shape}, quat {self.quat.shape} and {len(self.body_names)} bodies disagree")
+            raise ValueError(
+                f"IKTargets: pos {self.pos.shape}, quat {self.quat.shape} and {len(self.body_names)} bodies disagree"
+            )
         if self.pos_weight.shape != (K,) or self.rot_weight.shape != (K,):
             raise ValueError("IKTargets: pos_weight and rot_weight must have one entry per body")
         if self.foot_contact is not None and self.foot_contact.shape != (T, 2):
             raise ValueError(f"IKTargets: foot_contact shape {self.foot_contact.shape} != ({T}, 2)")
         if self.object_contact is not None and self.object_contact.shape != (T, len(self.contact_links)):
-            raise ValueError(f"IKTargets: object_contact shape {self.object_contact.shape} != ({T}, {len(self.contact_links)})")
+            raise ValueError(
+                f"IKTargets: object_contact shape {self.object_contact.shape} != ({T}, {len(self.contact_links)})"
+            )
 
     @property
     def frames(self) -> int:

@@ -16,7 +16,8 @@ from pipeline.errors import InputError
 SHARED_MOCAP = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
 
 needs_shared = pytest.mark.skipif(
-    not SHARED_MOCAP.is_dir(), reason=f"real mocap test files not found at {SHARED_MOCAP} (a fresh clone has no ../shared)"
+    not SHARED_MOCAP.is_dir(),
+    reason=f"real mocap test files not found at {SHARED_MOCAP} (a fresh clone has no ../shared)",
 )
 
 
@@ -24,7 +25,9 @@ def _snapshot(folder: Path) -> dict[str, tuple[int, int]]:
     return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) for p in folder.rglob("*")}
 
 
-def expect_input_error(call, folder: Path, *, file, field: str, frame: int | None = None, match: str | None = None) -> InputError:
+def expect_input_error(
+    call, folder: Path, *, file, field: str, frame: int | None = None, match: str | None = None
+) -> InputError:
     """Run ``call()``; it must raise :class:`InputError` whose one-line message names ``file``,
     ``field`` (and ``frame`` when given), and must leave ``folder`` exactly as it was."""
     before = _snapshot(folder)

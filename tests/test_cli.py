@@ -6,13 +6,15 @@ import sys
 
 import numpy as np
 import pytest
+from mocap_paths import SHARED_MOCAP, needs_shared
 
 from pipeline.cli import main
-from mocap_paths import SHARED_MOCAP, needs_shared
 
 
 def test_help_lists_every_command():
-    out = subprocess.run([sys.executable, "-m", "pipeline.cli", "--help"], capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(
+        [sys.executable, "-m", "pipeline.cli", "--help"], capture_output=True, text=True, check=True
+    ).stdout
     for cmd in ("retarget", "physicalize", "features", "inspect", "load", "publish", "merge"):
         assert cmd in out
 
@@ -52,7 +54,10 @@ def test_default_chain_retarget_physicalize_features(tmp_path, monkeypatch, caps
     # A second run is up to date; one with another option refuses to overwrite, with one line; the dataset stays intact.
     capsys.readouterr()
     assert main(["retarget"]) == 0
-    assert capsys.readouterr().out == "retarget: datasets/default/retargeted/ is up to date (same input and options); nothing to do\n"
+    assert (
+        capsys.readouterr().out
+        == "retarget: datasets/default/retargeted/ is up to date (same input and options); nothing to do\n"
+    )
     assert main(["retarget", "--height", "1.7"]) == 2
     err = capsys.readouterr().err
     assert "--overwrite" in err and err.count("\n") == 1
@@ -74,8 +79,11 @@ def test_default_chain_retarget_physicalize_features(tmp_path, monkeypatch, caps
     assert report["summary"]["episodes_written"] == 4
     assert main(["features"]) == 0 and main(["features"]) == 0
     assert "features/ is up to date" in capsys.readouterr().out
-    feats = LeRobotDataset("lessmimic/default-features", root=tmp_path / "default" / "features",
-                           delta_timestamps={"observation.df": [-0.08, -0.06, -0.04, -0.02, 0.0]})  # fmt: skip
+    feats = LeRobotDataset(
+        "lessmimic/default-features",
+        root=tmp_path / "default" / "features",
+        delta_timestamps={"observation.df": [-0.08, -0.06, -0.04, -0.02, 0.0]},
+    )
     physicalized = LeRobotDataset("lessmimic/default-physicalized", root=tmp_path / "default" / "physicalized")
     assert feats.num_episodes == physicalized.num_episodes and feats.num_frames == physicalized.num_frames > 0
     item = feats[feats.num_frames - 1]
@@ -96,8 +104,13 @@ def test_retarget_rerun_on_the_same_input_does_nothing(tmp_path, monkeypatch, ca
     take = tmp_path / "take.npz"
 
     def save(frames: int) -> None:  # a short keypoints take (a few seconds of IK)
-        np.savez(take, joint_pos=clip.joint_pos[:frames], joint_names=np.array(clip.skeleton.joint_names),
-                 parents=np.array(clip.skeleton.parents), fps=clip.fps)  # fmt: skip
+        np.savez(
+            take,
+            joint_pos=clip.joint_pos[:frames],
+            joint_names=np.array(clip.skeleton.joint_names),
+            parents=np.array(clip.skeleton.parents),
+            fps=clip.fps,
+        )
 
     save(15)
     args = ["retarget", "--input", str(take), "--name", "take"]
@@ -106,7 +119,10 @@ def test_retarget_rerun_on_the_same_input_does_nothing(tmp_path, monkeypatch, ca
     capsys.readouterr()
     assert main(args + ["-j", "2"]) == 0  # the number of worker processes does not change the output
     out, err = capsys.readouterr()
-    assert out == "retarget: datasets/take/retargeted/ is up to date (same input and options); nothing to do\n" and err == ""
+    assert (
+        out == "retarget: datasets/take/retargeted/ is up to date (same input and options); nothing to do\n"
+        and err == ""
+    )
     assert _tree(tmp_path / "datasets") == before  # nothing rewritten, not even touched
     assert main(args + ["--height", "1.6"]) == 2  # another option
     save(16)  # another input
@@ -137,7 +153,11 @@ def test_omomo_folder_is_retargeted_and_physicalized_valid(tmp_path, monkeypatch
     report = json.loads((tmp_path / "omomo" / "physicalized" / "report.json").read_text())
     (clip,) = report["clips"]
     assert clip["valid"], clip["reason"]
-    assert clip["frames_simulated"] == clip["frames"] and clip["object_pos_err_m"] < 0.1 and clip["replay_err_max_m"] <= 1e-6
+    assert (
+        clip["frames_simulated"] == clip["frames"]
+        and clip["object_pos_err_m"] < 0.1
+        and clip["replay_err_max_m"] <= 1e-6
+    )
     assert clip["reference_grasp_outside_friction_frac"] == 0.0  # a squeeze: every planned hand force within friction
     assert LeRobotDataset("lessmimic/omomo-physicalized", root=tmp_path / "omomo" / "physicalized").num_episodes == 1
 
@@ -148,7 +168,20 @@ def test_inspect_peer_robot_file_with_its_object(tmp_path):
 
     out = tmp_path / "peer.mcap"
     npz = SHARED_MOCAP / "omniretarget" / "sub3_largebox_003_mj_w_obj.npz"
-    assert main(["inspect", str(npz), "--robot", "--object-mesh", str(SHARED_MOCAP / "omomo" / "largebox.obj"), "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "inspect",
+                str(npz),
+                "--robot",
+                "--object-mesh",
+                str(SHARED_MOCAP / "omomo" / "largebox.obj"),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     with out.open("rb") as f:
         summary = make_reader(f).get_summary()
     counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
@@ -159,7 +192,14 @@ def test_inspect_peer_robot_file_with_its_object(tmp_path):
 def test_evaluate_retarget_on_the_peer_file(tmp_path, capsys):
     out = tmp_path / "m.json"
     npz = SHARED_MOCAP / "omniretarget" / "sub3_largebox_003_mj_w_obj.npz"
-    args = ["evaluate-retarget", str(npz), "--object-mesh", str(SHARED_MOCAP / "omomo" / "largebox.obj"), "--out", str(out)]
+    args = [
+        "evaluate-retarget",
+        str(npz),
+        "--object-mesh",
+        str(SHARED_MOCAP / "omomo" / "largebox.obj"),
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     m = json.loads(out.read_text())
     assert m["frames"] == 325 and m["fps"] == 50

@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.clip import HumanClip, ObjectTrack, RobotClip, Skeleton
 from pipeline.errors import InputError
-from pipeline.geometry import Primitive, geometry_from_dict, geometry_to_dict, Chair, MeshGeometry, ObjectPhysics
+from pipeline.geometry import Chair, MeshGeometry, ObjectPhysics, Primitive, geometry_from_dict, geometry_to_dict
 from pipeline.rotations import wxyz_from_rotation
 
 SKEL = Skeleton(("pelvis", "spine", "head"), (-1, 0, 1))
@@ -115,7 +115,12 @@ def test_robot_resample_keeps_objects_in_step():
 
 
 def test_geometry_round_trip_and_checks():
-    for g in (BOX.scaled(1.6), Chair(seat_height=0.4), MeshGeometry("a.obj", (1, 1, 2), "decomposition"), Primitive("capsule", (0.1, 0.3))):
+    for g in (
+        BOX.scaled(1.6),
+        Chair(seat_height=0.4),
+        MeshGeometry("a.obj", (1, 1, 2), "decomposition"),
+        Primitive("capsule", (0.1, 0.3)),
+    ):
         assert geometry_from_dict(geometry_to_dict(g)) == g
     np.testing.assert_allclose(BOX.scaled(0.4).half_extents, [0.08, 0.08, 0.08])
     with pytest.raises(ValueError, match="box size must be 3 positive numbers"):

@@ -39,7 +39,15 @@ def _qpos(T, seed):
 def _box(T, seed, contact=True):
     pose = np.tile([0.5, 0.0, 0.4, 1.0, 0.0, 0.0, 0.0], (T, 1))
     pose[:, 0] += 0.01 * np.arange(T)
-    return ObjectTrack("box", Primitive("box", (0.2, 0.15, 0.1)), pose, (np.arange(T) % 3 == 0) if contact else None, 2.5, f"box{seed}.obj", 0.3)
+    return ObjectTrack(
+        "box",
+        Primitive("box", (0.2, 0.15, 0.1)),
+        pose,
+        (np.arange(T) % 3 == 0) if contact else None,
+        2.5,
+        f"box{seed}.obj",
+        0.3,
+    )
 
 
 def _chair(T):
@@ -48,28 +56,53 @@ def _chair(T):
 
 def _robot_clip(T, seed, contacts=True, box_contact=True, task="lift the box"):
     return RobotClip(
-        _qpos(T, seed), 50.0, f"take{seed}.npz", objects=(_box(T, seed, box_contact), _chair(T)), contact_links=LINKS,
-        contacts=(np.random.default_rng(seed).random((T, 3)) < 0.3) if contacts else None, method="mink-ik",
-        provenance={"source_frame_start": 7 * seed, "synthetic": seed == 2, "note": "test"}, task=task,
-    )  # fmt: skip
+        _qpos(T, seed),
+        50.0,
+        f"take{seed}.npz",
+        objects=(_box(T, seed, box_contact), _chair(T)),
+        contact_links=LINKS,
+        contacts=(np.random.default_rng(seed).random((T, 3)) < 0.3) if contacts else None,
+        method="mink-ik",
+        provenance={"source_frame_start": 7 * seed, "synthetic": seed == 2, "note": "test"},
+        task=task,
+    )
 
 
 def _assert_robot_equal(a: RobotClip, b: RobotClip):
     np.testing.assert_allclose(a.qpos, b.qpos, **F32)
-    assert (a.fps, a.source, a.method, a.provenance, a.task, a.contact_links) == (b.fps, b.source, b.method, b.provenance, b.task, b.contact_links)
-    assert (a.contacts is None) == (b.contacts is None) and (a.contacts is None or np.array_equal(a.contacts, b.contacts))
+    assert (a.fps, a.source, a.method, a.provenance, a.task, a.contact_links) == (
+        b.fps,
+        b.source,
+        b.method,
+        b.provenance,
+        b.task,
+        b.contact_links,
+    )
+    assert (a.contacts is None) == (b.contacts is None) and (
+        a.contacts is None or np.array_equal(a.contacts, b.contacts)
+    )
     assert len(a.objects) == len(b.objects)
     for oa, ob in zip(a.objects, b.objects):
-        assert (oa.name, oa.geometry, oa.mass, oa.friction, oa.source) == (ob.name, ob.geometry, ob.mass, ob.friction, ob.source)
+        assert (oa.name, oa.geometry, oa.mass, oa.friction, oa.source) == (
+            ob.name,
+            ob.geometry,
+            ob.mass,
+            ob.friction,
+            ob.source,
+        )
         np.testing.assert_allclose(oa.pose, ob.pose, **F32)
-        assert (oa.contact is None) == (ob.contact is None) and (oa.contact is None or np.array_equal(oa.contact, ob.contact))
+        assert (oa.contact is None) == (ob.contact is None) and (
+            oa.contact is None or np.array_equal(oa.contact, ob.contact)
+        )
 
 
 def test_qpos_difference_matches_mujoco():
     """Against MuJoCo on a model with the G1's joint layout (a free joint, then 29 hinges)."""
     mujoco = pytest.importorskip("mujoco")
     chain = "".join('<body><joint type="hinge" axis="0 1 0"/><geom size="0.01"/>' for _ in range(29)) + "</body>" * 29
-    m = mujoco.MjModel.from_xml_string(f'<mujoco><worldbody><body><freejoint/><geom size="0.1"/>{chain}</body></worldbody></mujoco>')
+    m = mujoco.MjModel.from_xml_string(
+        f'<mujoco><worldbody><body><freejoint/><geom size="0.1"/>{chain}</body></worldbody></mujoco>'
+    )
     assert (m.nq, m.nv) == (36, 35)
     q = _qpos(12, 3)
     q[5, 3:7] *= -1  # the other cover of the same rotation
@@ -100,7 +133,9 @@ def test_source_frame_of_a_resampled_clip():
     from dataclasses import replace
 
     clip = _robot_clip(10, 1)
-    resampled = replace(clip, provenance={**clip.provenance, "source_fps": 30.0})  # retargeted at 50 fps from a 30 fps take
+    resampled = replace(
+        clip, provenance={**clip.provenance, "source_fps": 30.0}
+    )  # retargeted at 50 fps from a 30 fps take
     _, (ep,) = robot_clips_to_episodes([resampled])
     np.testing.assert_array_equal(ep.data["source_frame"], 7 + np.array([0, 1, 1, 2, 2, 3, 4, 4, 5, 5]))
 
@@ -109,7 +144,15 @@ def test_robot_round_trip_through_lerobot(tmp_path):
     clips = [_robot_clip(9, 1), _robot_clip(6, 2, contacts=False, box_contact=False, task=""), _robot_clip(1, 3)]
     features, episodes = robot_clips_to_episodes(clips)
     names = [f.name for f in features]
-    assert names == ["observation.state", "observation.qvel", "contact", "object.box.pose", "object.box.contact", "object.chair.pose", "source_frame"]
+    assert names == [
+        "observation.state",
+        "observation.qvel",
+        "contact",
+        "object.box.pose",
+        "object.box.contact",
+        "object.chair.pose",
+        "source_frame",
+    ]
     assert features[0].names == QPOS_NAMES
     root = write_dataset(tmp_path / "robot", "tester/robot", clips_fps(clips), features, episodes)
     ds = LeRobotDataset("tester/robot", root=root)
@@ -118,7 +161,9 @@ def test_robot_round_trip_through_lerobot(tmp_path):
         for t in range(c.frames):
             item = ds[i]
             np.testing.assert_allclose(item["observation.state"].numpy(), c.qpos[t], **F32)
-            np.testing.assert_array_equal(item["observation.qvel"].numpy(), ep.data["observation.qvel"][t].astype(np.float32))
+            np.testing.assert_array_equal(
+                item["observation.qvel"].numpy(), ep.data["observation.qvel"][t].astype(np.float32)
+            )
             np.testing.assert_allclose(item["object.box.pose"].numpy(), c.objects[0].pose[t], **F32)
             assert item["source_frame"].item() == t + c.provenance["source_frame_start"]
             assert item["task"] == (c.task or "humanoid whole-body motion")
@@ -132,8 +177,16 @@ def test_robot_round_trip_through_lerobot(tmp_path):
 def _physicalized(T, seed):
     rng = np.random.default_rng(seed)
     robot = _robot_clip(T, seed)
-    return PhysicalizedClip(robot, rng.normal(size=(T, 35)), (rng.normal(size=(T, 6)), np.zeros((T, 6))), rng.normal(size=(T, 29)),
-                            rng.normal(size=(T, 29)), rng.random((T, 2)) * 300, _qpos(T, seed + 10), {"valid": seed == 1, "reason": "" if seed == 1 else "fell at t=0.10 s"})  # fmt: skip
+    return PhysicalizedClip(
+        robot,
+        rng.normal(size=(T, 35)),
+        (rng.normal(size=(T, 6)), np.zeros((T, 6))),
+        rng.normal(size=(T, 29)),
+        rng.normal(size=(T, 29)),
+        rng.random((T, 2)) * 300,
+        _qpos(T, seed + 10),
+        {"valid": seed == 1, "reason": "" if seed == 1 else "fell at t=0.10 s"},
+    )
 
 
 def test_physicalized_round_trip_through_lerobot(tmp_path):
@@ -153,9 +206,19 @@ def test_physicalized_round_trip_through_lerobot(tmp_path):
         assert a.validation == b.validation
     with pytest.raises(InputError, match="not a physicalized dataset"):
         robot_features, robot_episodes = robot_clips_to_episodes([c.robot for c in clips])
-        episodes_to_physicalized_clips(write_dataset(tmp_path / "robot", "tester/robot", 50, robot_features, robot_episodes))
+        episodes_to_physicalized_clips(
+            write_dataset(tmp_path / "robot", "tester/robot", 50, robot_features, robot_episodes)
+        )
     with pytest.raises(InputError, match="action.*frames"):
-        PhysicalizedClip(clips[0].robot, clips[0].qvel, clips[0].object_vel, clips[0].action[:3], clips[0].torque, clips[0].foot_force, clips[0].reference_qpos)
+        PhysicalizedClip(
+            clips[0].robot,
+            clips[0].qvel,
+            clips[0].object_vel,
+            clips[0].action[:3],
+            clips[0].torque,
+            clips[0].foot_force,
+            clips[0].reference_qpos,
+        )
 
 
 def test_human_round_trip_through_lerobot(tmp_path):
@@ -165,9 +228,18 @@ def test_human_round_trip_through_lerobot(tmp_path):
     def clip(T, k, contacts):
         pos = rng.normal(size=(T, 4, 3)) + [0, 0, 1]
         quat = wxyz_from_rotation(Rotation.random(T * 4, random_state=k)).reshape(T, 4, 4)
-        return HumanClip(skel, pos, 30.0, f"s{k}.bvh", subject_height=1.7, joint_quat=quat,
-                         contacts=(rng.random((T, 4)) < 0.5) if contacts else None, objects=(_box(T, k),),
-                         task="carry", synthetic=k == 1)  # fmt: skip
+        return HumanClip(
+            skel,
+            pos,
+            30.0,
+            f"s{k}.bvh",
+            subject_height=1.7,
+            joint_quat=quat,
+            contacts=(rng.random((T, 4)) < 0.5) if contacts else None,
+            objects=(_box(T, k),),
+            task="carry",
+            synthetic=k == 1,
+        )
 
     clips = [clip(5, 0, True), clip(4, 1, False)]
     features, episodes = human_clips_to_episodes(clips)
@@ -177,10 +249,19 @@ def test_human_round_trip_through_lerobot(tmp_path):
     np.testing.assert_allclose(ds[6]["observation.joint_pos"].numpy().reshape(4, 3), clips[1].joint_pos[1], **F32)
     back = episodes_to_human_clips(root)
     for a, b in zip(back, clips):
-        assert (a.skeleton, a.fps, a.source, a.subject_height, a.task, a.synthetic) == (b.skeleton, b.fps, b.source, b.subject_height, b.task, b.synthetic)
+        assert (a.skeleton, a.fps, a.source, a.subject_height, a.task, a.synthetic) == (
+            b.skeleton,
+            b.fps,
+            b.source,
+            b.subject_height,
+            b.task,
+            b.synthetic,
+        )
         np.testing.assert_allclose(a.joint_pos, b.joint_pos, **F32)
         np.testing.assert_allclose(a.joint_quat, b.joint_quat, atol=1e-6)
-        assert (a.contacts is None) == (b.contacts is None) and (a.contacts is None or np.array_equal(a.contacts, b.contacts))
+        assert (a.contacts is None) == (b.contacts is None) and (
+            a.contacts is None or np.array_equal(a.contacts, b.contacts)
+        )
         assert a.objects[0].geometry == b.objects[0].geometry
     with pytest.raises(InputError, match="was not written from a robot clip"):
         episodes_to_robot_clips(root)
@@ -192,7 +273,9 @@ def test_inconsistent_clips_are_refused():
     with pytest.raises(InputError, match=r"other.npz: objects: \['chair'\] differ"):
         robot_clips_to_episodes([a, b])
     with pytest.raises(InputError, match="other.npz: contact_links"):
-        robot_clips_to_episodes([a, RobotClip(_qpos(4, 2), 50.0, "other.npz", objects=a.objects, contact_links=("pelvis",))])
+        robot_clips_to_episodes(
+            [a, RobotClip(_qpos(4, 2), 50.0, "other.npz", objects=a.objects, contact_links=("pelvis",))]
+        )
     with pytest.raises(InputError, match="other.npz: fps: 30.0 differs"):
         robot_clips_to_episodes([a, RobotClip(_qpos(4, 2), 30.0, "other.npz")])
     with pytest.raises(InputError, match="not an integer"):

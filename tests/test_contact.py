@@ -58,7 +58,9 @@ def _solve(scene, task_cost: float, weight: float, steps: int = 60):
     q = cfg.q.copy()
     q[:36] = default_qpos(scene.profile)
     cfg.update(q)
-    task = ContactTask(m, (WRIST, "left_wrist_yaw_link"), object_collision_geoms(m, scene), cost=task_cost, gap=0.01, reach=0.3)
+    task = ContactTask(
+        m, (WRIST, "left_wrist_yaw_link"), object_collision_geoms(m, scene), cost=task_cost, gap=0.01, reach=0.3
+    )
     task.set_weights(np.array([weight, 1.0]))
     pelvis = mink.FrameTask("pelvis", "body", position_cost=100.0, orientation_cost=100.0)
     pelvis.set_target_from_configuration(cfg)
@@ -111,7 +113,9 @@ def test_a_resting_object_takes_the_offset_its_rest_ends_with():
     p_out = p_in.copy()
     p_out[:, :3] += off
     held = hold_resting(p_in, p_out, fps)
-    np.testing.assert_allclose(held[:20, :3] - p_in[:20, :3], np.tile([0.0, 0.02, 0.0], (20, 1)))  # never slides before its first move
+    np.testing.assert_allclose(
+        held[:20, :3] - p_in[:20, :3], np.tile([0.0, 0.02, 0.0], (20, 1))
+    )  # never slides before its first move
     np.testing.assert_allclose(held[20:39], p_out[20:39])  # moving frames keep their offsets
     np.testing.assert_allclose(held[39:], np.tile(held[-1], (21, 1)))  # stands still from the frame it arrives at rest
     np.testing.assert_allclose(held[-1, :3], p_in[-1, :3] + off[-1])

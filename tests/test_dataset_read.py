@@ -23,8 +23,15 @@ LENGTHS = (3, 8, 1, 6)  # a 3-frame and a 1-frame episode: windows padded on eve
 def dataset(tmp_path_factory):
     rng = np.random.default_rng(1)
     eps = [
-        Episode(f"task{k % 2}", {"observation.state": rng.normal(size=(T, 4)).astype(np.float32), "contact": rng.random((T, 2)) < 0.5,
-                                 "source_frame": np.arange(T) + 10 * k}, {"k": k})  # fmt: skip
+        Episode(
+            f"task{k % 2}",
+            {
+                "observation.state": rng.normal(size=(T, 4)).astype(np.float32),
+                "contact": rng.random((T, 2)) < 0.5,
+                "source_frame": np.arange(T) + 10 * k,
+            },
+            {"k": k},
+        )
         for k, T in enumerate(LENGTHS)
     ]
     root = write_dataset(tmp_path_factory.mktemp("read") / "ds", "tester/ds", FPS, FEATURES, eps)

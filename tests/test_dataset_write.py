@@ -49,7 +49,9 @@ def assert_frames_equal(ds, episodes):
         T = len(ep.data["source_frame"])
         for t in range(T):
             item = ds[i]
-            np.testing.assert_array_equal(item["observation.state"].numpy(), ep.data["observation.state"][t].astype(np.float32))
+            np.testing.assert_array_equal(
+                item["observation.state"].numpy(), ep.data["observation.state"][t].astype(np.float32)
+            )
             np.testing.assert_array_equal(item["contact"].numpy(), ep.data["contact"][t])
             assert item["source_frame"].item() == ep.data["source_frame"][t]
             assert item["timestamp"].item() == np.float32(t / FPS)
@@ -60,7 +62,9 @@ def assert_frames_equal(ds, episodes):
 
 def test_lerobot_loads_frame_by_frame(tmp_path):
     eps = make_episodes()
-    root = write_dataset(tmp_path / "ds", "tester/ds", FPS, FEATURES, eps, card=DatasetCard("Test set", stage="retarget"))
+    root = write_dataset(
+        tmp_path / "ds", "tester/ds", FPS, FEATURES, eps, card=DatasetCard("Test set", stage="retarget")
+    )
     ds = LeRobotDataset("tester/ds", root=root)
     assert ds.meta.total_episodes == 3 and ds.meta.total_tasks == 2 and ds.fps == FPS
     assert ds.meta.robot_type == "unitree_g1"
@@ -96,8 +100,14 @@ def test_layout_matches_stock_lerobot(tmp_path):
     (A stock 1-element feature cannot be written with numpy 2.4 -- see the report -- so none here.)"""
     feats = FEATURES[:2]
     eps = [Episode(e.task, {k: e.data[k] for k in ("observation.state", "contact")}) for e in make_episodes((4, 3, 2))]
-    stock = LeRobotDataset.create("tester/stock", fps=FPS, features={f.name: {"dtype": f.dtype, "shape": f.shape, "names": list(f.names)} for f in feats},
-                                  root=tmp_path / "stock", robot_type="unitree_g1", use_videos=False)  # fmt: skip
+    stock = LeRobotDataset.create(
+        "tester/stock",
+        fps=FPS,
+        features={f.name: {"dtype": f.dtype, "shape": f.shape, "names": list(f.names)} for f in feats},
+        root=tmp_path / "stock",
+        robot_type="unitree_g1",
+        use_videos=False,
+    )
     for ep in eps:
         for t in range(len(ep.data["contact"])):
             stock.add_frame({**{k: v[t] for k, v in ep.data.items()}, "task": ep.task})
@@ -112,18 +122,28 @@ def test_layout_matches_stock_lerobot(tmp_path):
     hf_a = json.loads(pq.read_schema(ours / "data/chunk-000/file-000.parquet").metadata[b"huggingface"])
     hf_b = json.loads(pq.read_schema(s_root / "data/chunk-000/file-000.parquet").metadata[b"huggingface"])
     assert hf_a["info"] == hf_b["info"]
-    pd.testing.assert_frame_equal(pd.read_parquet(ours / "meta/tasks.parquet"), pd.read_parquet(s_root / "meta/tasks.parquet"))
-    ea, eb = pd.read_parquet(ours / "meta/episodes/chunk-000/file-000.parquet"), pd.read_parquet(s_root / "meta/episodes/chunk-000/file-000.parquet")
+    pd.testing.assert_frame_equal(
+        pd.read_parquet(ours / "meta/tasks.parquet"), pd.read_parquet(s_root / "meta/tasks.parquet")
+    )
+    ea, eb = (
+        pd.read_parquet(ours / "meta/episodes/chunk-000/file-000.parquet"),
+        pd.read_parquet(s_root / "meta/episodes/chunk-000/file-000.parquet"),
+    )
     cols = ["episode_index", "length", "dataset_from_index", "dataset_to_index", "data/chunk_index", "data/file_index"]
     pd.testing.assert_frame_equal(ea[cols], eb[cols])
     assert ea["tasks"].map(list).tolist() == eb["tasks"].map(list).tolist()
     for col in ea.columns:  # exact stats agree; quantiles differ (LeRobot's are histogram estimates)
         if col.startswith("stats/") and col.rsplit("/", 1)[1] in ("min", "max", "mean", "std", "count"):
             # LeRobot accumulates float32 data in float32 (std = sqrt(E[x^2] - E[x]^2)); ours is float64
-            np.testing.assert_allclose(np.stack(ea[col]).astype(float), np.stack(eb[col]).astype(float), rtol=1e-4, atol=1e-5, err_msg=col)
+            np.testing.assert_allclose(
+                np.stack(ea[col]).astype(float), np.stack(eb[col]).astype(float), rtol=1e-4, atol=1e-5, err_msg=col
+            )
     sa, sb = (json.loads((r / "meta/stats.json").read_text()) for r in (ours, s_root))
     assert {k: set(v) for k, v in sa.items()} == {k: set(v) for k, v in sb.items()}
-    pa_t, pb_t = pq.read_table(ours / "data/chunk-000/file-000.parquet"), pq.read_table(s_root / "data/chunk-000/file-000.parquet")
+    pa_t, pb_t = (
+        pq.read_table(ours / "data/chunk-000/file-000.parquet"),
+        pq.read_table(s_root / "data/chunk-000/file-000.parquet"),
+    )
     assert pa_t.to_pylist() == pb_t.to_pylist()
     # our training reader serves the LeRobot-written dataset the same way
     from pipeline.dataset import WindowDataset
@@ -142,8 +162,22 @@ def test_many_files_and_chunks_load(tmp_path):
 
 
 def test_merge_shards(tmp_path):
-    a = write_dataset(tmp_path / "a", "tester/a", FPS, FEATURES, make_episodes((4, 6), ["walk", "sit"]), card=DatasetCard("A", provenance=["shard a"]))
-    b = write_dataset(tmp_path / "b", "tester/b", FPS, FEATURES, make_episodes((5, 3), ["push", "walk"], seed0=10), card=DatasetCard("B", provenance=["shard b"]))
+    a = write_dataset(
+        tmp_path / "a",
+        "tester/a",
+        FPS,
+        FEATURES,
+        make_episodes((4, 6), ["walk", "sit"]),
+        card=DatasetCard("A", provenance=["shard a"]),
+    )
+    b = write_dataset(
+        tmp_path / "b",
+        "tester/b",
+        FPS,
+        FEATURES,
+        make_episodes((5, 3), ["push", "walk"], seed0=10),
+        card=DatasetCard("B", provenance=["shard b"]),
+    )
     out = merge_datasets([a, b], tmp_path / "merged", "tester/merged")
     eps = make_episodes((4, 6), ["walk", "sit"]) + make_episodes((5, 3), ["push", "walk"], seed0=10)
     ds = LeRobotDataset("tester/merged", root=out)
@@ -155,7 +189,13 @@ def test_merge_shards(tmp_path):
     c = write_dataset(tmp_path / "c", "tester/c", 50, FEATURES, make_episodes((3,), ["walk"]))
     with pytest.raises(InputError, match="fps.*cannot merge"):
         merge_datasets([a, c], tmp_path / "bad", "tester/bad")
-    d = write_dataset(tmp_path / "d", "tester/d", FPS, FEATURES[:2], [Episode("x", {k: v for k, v in make_episode(3, "x", 0).data.items() if k != "source_frame"})])
+    d = write_dataset(
+        tmp_path / "d",
+        "tester/d",
+        FPS,
+        FEATURES[:2],
+        [Episode("x", {k: v for k, v in make_episode(3, "x", 0).data.items() if k != "source_frame"})],
+    )
     with pytest.raises(InputError, match="features.*cannot merge"):
         merge_datasets([a, d], tmp_path / "bad", "tester/bad")
     assert not (tmp_path / "bad").exists()
@@ -211,13 +251,31 @@ def _nan_at_3(d):
     "episodes, match",
     [
         (_bad(_nan_at_3), r"dataset tester/ds episode 1: frame 3: observation.state: is NaN or infinite"),
-        (_bad({"observation.state": np.zeros((5, 7), np.float32)}), r"episode 1: observation.state: shape \(5, 7\) does not match \(T, 6\)"),
-        (_bad({"observation.state": np.zeros((0, 6), np.float32), "contact": np.zeros((0, 3), bool), "source_frame": np.zeros(0, int)}), r"episode 1: .*has zero frames"),
+        (
+            _bad({"observation.state": np.zeros((5, 7), np.float32)}),
+            r"episode 1: observation.state: shape \(5, 7\) does not match \(T, 6\)",
+        ),
+        (
+            _bad(
+                {
+                    "observation.state": np.zeros((0, 6), np.float32),
+                    "contact": np.zeros((0, 3), bool),
+                    "source_frame": np.zeros(0, int),
+                }
+            ),
+            r"episode 1: .*has zero frames",
+        ),
         (_bad({"source_frame": np.arange(5) + 0.5}), r"episode 1: source_frame: has floating dtype float64"),
-        (_bad({"contact": np.full((5, 3), 2)}), r"episode 1: frame 0: contact: bool feature holds a value other than 0 or 1"),
+        (
+            _bad({"contact": np.full((5, 3), 2)}),
+            r"episode 1: frame 0: contact: bool feature holds a value other than 0 or 1",
+        ),
         (_bad({"contact": np.zeros((4, 3), bool)}), r"episode 1: data: features have different frame counts"),
         (_bad({"extra": np.zeros((5, 1))}), r"episode 1: data: missing features \[\], unknown features \['extra'\]"),
-        (_bad({"observation.state": np.full((5, 6), 1e39)}), r"episode 1: frame 0: observation.state: is NaN or infinite \(in float32\)"),
+        (
+            _bad({"observation.state": np.full((5, 6), 1e39)}),
+            r"episode 1: frame 0: observation.state: is NaN or infinite \(in float32\)",
+        ),
         ([], r"no episodes"),
         ([Episode("", make_episode(3, "x", 0).data)], r"episode 0: task: must be a non-empty string"),
         ([Episode("x", make_episode(3, "x", 0).data, {"bad": object()})], r"episode 0: meta: is not JSON-serialisable"),
@@ -275,7 +333,9 @@ def test_staging_left_by_a_killed_writer_is_removed(tmp_path):
     import subprocess
     import sys
 
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True)
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True
+    )
     pid = int(dead.stdout)
     orphan = tmp_path / f".ds.staging-{pid}-deadbeef"
     (orphan / "meta").mkdir(parents=True)

@@ -9,11 +9,29 @@ from pipeline.geometry import Chair, Primitive
 from pipeline.rotations import rotation_from_wxyz
 
 SMPL22 = [
-    ("pelvis", -1), ("left_hip", 0), ("right_hip", 0), ("spine1", 0), ("left_knee", 1), ("right_knee", 2),
-    ("spine2", 3), ("left_ankle", 4), ("right_ankle", 5), ("spine3", 6), ("left_foot", 7), ("right_foot", 8),
-    ("neck", 9), ("left_collar", 9), ("right_collar", 9), ("head", 12), ("left_shoulder", 13),
-    ("right_shoulder", 14), ("left_elbow", 16), ("right_elbow", 17), ("left_wrist", 18), ("right_wrist", 19),
-]  # fmt: skip
+    ("pelvis", -1),
+    ("left_hip", 0),
+    ("right_hip", 0),
+    ("spine1", 0),
+    ("left_knee", 1),
+    ("right_knee", 2),
+    ("spine2", 3),
+    ("left_ankle", 4),
+    ("right_ankle", 5),
+    ("spine3", 6),
+    ("left_foot", 7),
+    ("right_foot", 8),
+    ("neck", 9),
+    ("left_collar", 9),
+    ("right_collar", 9),
+    ("head", 12),
+    ("left_shoulder", 13),
+    ("right_shoulder", 14),
+    ("left_elbow", 16),
+    ("right_elbow", 17),
+    ("left_wrist", 18),
+    ("right_wrist", 19),
+]
 ANKLES, FEET, WRISTS = (7, 8), (10, 11), (20, 21)
 TASKS = ["PickUp", "SitStand", "Push", "Carry"]
 
@@ -206,7 +224,18 @@ def test_phases_cover_each_clip(demos):
 
 def test_clips_validate_and_resample():
     for c in default_clips():
-        again = HumanClip(c.skeleton, c.joint_pos, c.fps, c.source, c.subject_height, c.joint_quat, c.contacts, c.objects, c.task, c.synthetic)
+        again = HumanClip(
+            c.skeleton,
+            c.joint_pos,
+            c.fps,
+            c.source,
+            c.subject_height,
+            c.joint_quat,
+            c.contacts,
+            c.objects,
+            c.task,
+            c.synthetic,
+        )
         assert again.frames == c.frames
         r = c.resampled(50.0)
         assert r.synthetic and r.fps == 50.0 and abs(r.duration - c.duration) < 0.03

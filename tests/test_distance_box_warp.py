@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from fused_poses import check_pose_per_frame
+
 from pipeline.distance_field import ObjectField
 from pipeline.distance_primitive import _box_phi, chair_shape, primitive_shape
 from pipeline.geometry import Chair, Primitive
@@ -44,7 +44,11 @@ def _chair_points(chair: Chair, n: int = 6000) -> np.ndarray:
     shape = chair_shape(chair)
     rng = np.random.default_rng(6)
     hd, hw = chair.seat_depth / 2, chair.seat_width / 2
-    p = [rng.uniform([-hd - 0.3, -hw - 0.3, -0.2], [hd + 0.3, hw + 0.3, chair.seat_height + chair.back_height + 0.2], (n, 3))]
+    p = [
+        rng.uniform(
+            [-hd - 0.3, -hw - 0.3, -0.2], [hd + 0.3, hw + 0.3, chair.seat_height + chair.back_height + 0.2], (n, 3)
+        )
+    ]
     for box, o in shape.parts:
         p.append(_box_points(box.half, 800) + o)
     z = rng.uniform(-0.1, chair.seat_height, 400)
@@ -95,7 +99,9 @@ def test_chair_kernel_matches_numpy_with_the_first_part_on_ties():
     _, _, c = shape.world(p[tie], *IDENTITY)
     first = np.argmax(phis[:, tie] == phis[:, tie].min(0), axis=0)
     own = np.stack([_box_phi(*(c - shape.parts[k][1]).T, *shape.parts[k][0].half, np) for k in range(len(shape.parts))])
-    np.testing.assert_allclose(own[first, np.arange(len(first))], 0.0, atol=1e-12)  # the closest point lies on the first part
+    np.testing.assert_allclose(
+        own[first, np.arange(len(first))], 0.0, atol=1e-12
+    )  # the closest point lies on the first part
 
 
 @pytest.mark.parametrize("geom", [*BOXES, Chair()], ids=lambda g: getattr(g, "kind", "chair"))

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 import trimesh
+from mocap_paths import SHARED_MOCAP, needs_shared
 from scipy.spatial.transform import Rotation
 
 from pipeline.distance_field import ObjectField
@@ -17,7 +18,6 @@ from pipeline.distance_octree import OctreeSpec
 from pipeline.errors import InputError
 from pipeline.geometry import MeshGeometry
 from pipeline.warp_runtime import warp
-from mocap_paths import SHARED_MOCAP, needs_shared
 
 RNG = np.random.default_rng(5)
 SMALL = OctreeSpec(margin=0.15, root=0.1, depth=4, tol_near=2e-3, tol_far=1e-2)  # builds in ~2 s
@@ -60,7 +60,13 @@ def _winding_kernel():
     wp = warp()
 
     @wp.kernel
-    def winding_everywhere(mesh: wp.uint64, points: wp.array(dtype=wp.vec3), phi: wp.array(dtype=float), grad: wp.array(dtype=wp.vec3), closest: wp.array(dtype=wp.vec3)):
+    def winding_everywhere(
+        mesh: wp.uint64,
+        points: wp.array(dtype=wp.vec3),
+        phi: wp.array(dtype=float),
+        grad: wp.array(dtype=wp.vec3),
+        closest: wp.array(dtype=wp.vec3),
+    ):
         i = wp.tid()
         p = points[i]
         q = wp.mesh_query_point_sign_winding_number(mesh, p, 1.0e6, 2.0, 0.5)
@@ -75,7 +81,11 @@ def _winding_kernel():
 def _winding_everywhere(shape: MeshShape, p: np.ndarray):
     """The exact field with the winding-number sign at every point (no bounds test): phi, grad, closest."""
     wp = warp()
-    mesh = wp.Mesh(wp.array(shape.vertices.astype(np.float32), dtype=wp.vec3), wp.array(shape.faces.ravel(), dtype=wp.int32), support_winding_number=True)
+    mesh = wp.Mesh(
+        wp.array(shape.vertices.astype(np.float32), dtype=wp.vec3),
+        wp.array(shape.faces.ravel(), dtype=wp.int32),
+        support_winding_number=True,
+    )
     out = [np.empty(len(p), np.float32), np.empty((len(p), 3), np.float32), np.empty((len(p), 3), np.float32)]
     arrays = [wp.array(a, dtype=t, copy=False, device="cpu") for a, t in zip(out, [wp.float32, wp.vec3, wp.vec3])]
     pts = wp.array(p.astype(np.float32), dtype=wp.vec3, device="cpu")
@@ -195,7 +205,12 @@ def test_numpy_and_torch_agree_on_meshes(bumpy, cache):
     path, _ = bumpy
     field = ObjectField.from_geometry(MeshGeometry(path, (1.2, 1.0, 0.9)), cache=cache, spec=SMALL)
     p = RNG.uniform(-0.4, 0.4, (30, 50, 3))
-    poses = np.stack([np.r_[RNG.normal(size=3) * 0.05, Rotation.random(random_state=k).as_quat(scalar_first=True)] for k in range(30)])
+    poses = np.stack(
+        [
+            np.r_[RNG.normal(size=3) * 0.05, Rotation.random(random_state=k).as_quat(scalar_first=True)]
+            for k in range(30)
+        ]
+    )
     a = field.query_links(p, poses)
     for dev in ["cpu"] + (["cuda"] if torch.cuda.is_available() else []):
         b = field.query_links(torch.as_tensor(p, device=dev), torch.as_tensor(poses, device=dev))

@@ -33,9 +33,12 @@ def _patches(prim: Primitive):
 
                 out.append((f, (-h[a], h[a]), (-h[b], h[b])))
         return out
-    sph = lambda r, zc=0.0: lambda u, v: np.stack(  # noqa: E731
-        np.broadcast_arrays(r * np.sin(u) * np.cos(v), r * np.sin(u) * np.sin(v), zc + r * np.cos(u)), -1
-    )
+
+    def sph(r, zc=0.0):
+        return lambda u, v: np.stack(
+            np.broadcast_arrays(r * np.sin(u) * np.cos(v), r * np.sin(u) * np.sin(v), zc + r * np.cos(u)), -1
+        )
+
     if prim.kind == "sphere":
         return [(sph(s[0]), (0, np.pi), (-np.pi, np.pi))]
     r, hl = s
@@ -103,7 +106,11 @@ PRIMS = [
 
 
 def _points(prim: Primitive, n: int) -> np.ndarray:
-    ext = np.abs(np.concatenate([f(*np.meshgrid(np.linspace(*ur, 9), np.linspace(*vr, 9))).reshape(-1, 3) for f, ur, vr in _patches(prim)]))
+    ext = np.abs(
+        np.concatenate(
+            [f(*np.meshgrid(np.linspace(*ur, 9), np.linspace(*vr, 9))).reshape(-1, 3) for f, ur, vr in _patches(prim)]
+        )
+    )
     rng = np.random.default_rng(7)  # per call: the points do not depend on which tests ran before (xdist order)
     p = rng.uniform(-1.4, 1.4, (n, 3)) * ext.max(axis=0) * np.asarray(prim.scale)
     p[:8, :2] = 0.0  # on the axis
@@ -145,5 +152,7 @@ def test_grad_on_the_surface_is_the_outward_normal(prim):
 
 
 def test_box_inside_takes_the_nearest_face():
-    phi, g, c = primitive_shape(Primitive("box", (0.3, 0.2, 0.1))).local(np.array([0.27]), np.array([0.0]), np.array([0.0]), np)
+    phi, g, c = primitive_shape(Primitive("box", (0.3, 0.2, 0.1))).local(
+        np.array([0.27]), np.array([0.0]), np.array([0.0]), np
+    )
     assert phi[0] == pytest.approx(0.03) and [a[0] for a in g] == [1.0, 0.0, 0.0] and c[0][0] == pytest.approx(0.3)

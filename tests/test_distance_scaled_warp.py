@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-
 from fused_poses import check_pose_per_frame
+
 from pipeline.distance_primitive import primitive_shape
 from pipeline.geometry import Primitive
 

@@ -168,4 +168,9 @@ def test_config_rejects_a_model_without_the_robot_first():
     with pytest.raises(ValueError):
         import mujoco
 
-        ReferenceIK(mujoco.MjModel.from_xml_string("<mujoco><worldbody><body name='a'><freejoint/><geom size='.1'/></body></worldbody></mujoco>"), FeasibleConfig())
+        ReferenceIK(
+            mujoco.MjModel.from_xml_string(
+                "<mujoco><worldbody><body name='a'><freejoint/><geom size='.1'/></body></worldbody></mujoco>"
+            ),
+            FeasibleConfig(),
+        )

@@ -31,7 +31,16 @@ def _clip(T: int, name: str, objects=("box",)) -> PhysicalizedClip:
         tracks.append(ObjectTrack(n, BOX, pose, np.arange(T) > T // 2, 2.0, "hand-made"))
         vels.append(vel)
     robot = RobotClip(q, 50, f"hand-made:{name}", objects=tuple(tracks), task=name)
-    return PhysicalizedClip(robot, np.zeros((T, 35)), tuple(vels), q[:, 7:], np.zeros((T, 29)), np.full((T, 2), 170.0), q, {"valid": True, "reason": ""})
+    return PhysicalizedClip(
+        robot,
+        np.zeros((T, 35)),
+        tuple(vels),
+        q[:, 7:],
+        np.zeros((T, 29)),
+        np.full((T, 2), 170.0),
+        q,
+        {"valid": True, "reason": ""},
+    )
 
 
 def _physicalized(clips, name="feat"):
@@ -54,8 +63,15 @@ def test_features_dataset_loads_with_interaction_windows(tmp_path, monkeypatch, 
     ds = LeRobotDataset("lessmimic/feat-features", root=root, delta_timestamps={"observation.df": window})
     K = len(G1_LINK_NAMES)
     assert ds.num_episodes == 2 and ds.num_frames == 42
-    for key, dim in (("observation.df_relative", K * 10), ("observation.df_demo", 28), ("observation.root_command", 12),
-                     ("observation.proprio", 93), ("action", 29), ("object.box.pose", 7), ("observation.state", 36)):  # fmt: skip
+    for key, dim in (
+        ("observation.df_relative", K * 10),
+        ("observation.df_demo", 28),
+        ("observation.root_command", 12),
+        ("observation.proprio", 93),
+        ("action", 29),
+        ("object.box.pose", 7),
+        ("observation.state", 36),
+    ):
         assert tuple(ds.features[key]["shape"]) == (dim,)
     assert "observation.df_object" not in ds.features  # one object: no index column
     item = ds[31]  # episode 1, frame 1: the first 3 window frames are padding
@@ -71,7 +87,9 @@ def test_features_dataset_loads_with_interaction_windows(tmp_path, monkeypatch, 
     rel = np.stack([ds[t]["observation.df_relative"].numpy() for t in range(30)]).reshape(30, K, 10)
     np.testing.assert_allclose(df[..., 0], _box_distance(pos, c.robot.objects[0].pose[:, None, :3]), atol=1e-5)
     np.testing.assert_allclose(df[..., 4:], 0, atol=1e-6)  # the robot's links do not move
-    np.testing.assert_allclose((rel[..., 4:7] * rel[..., 1:4]).sum(-1), (np.array([0.2, 0, 0]) * rel[..., 1:4]).sum(-1), atol=1e-5)
+    np.testing.assert_allclose(
+        (rel[..., 4:7] * rel[..., 1:4]).sum(-1), (np.array([0.2, 0, 0]) * rel[..., 1:4]).sum(-1), atol=1e-5
+    )
     report = json.loads((root / "report.json").read_text())
     assert report["summary"]["frames"] == 42 and report["clips"][0]["frames_per_cpu_s"] > 0
     card = (root / "README.md").read_text()
@@ -102,11 +120,30 @@ def test_bad_inputs_are_one_line_errors(tmp_path, monkeypatch, capsys):
     _physicalized([_clip(5, "a")])
     assert main(["features", "--name", "feat", "--links", "pelvis,left_hand"]) == 2
     bare = _clip(5, "bare")
-    _physicalized([PhysicalizedClip(RobotClip(bare.robot.qpos, 50, "hand-made:bare"), bare.qvel, (), bare.action, bare.torque,
-                                    bare.foot_force, bare.reference_qpos)], name="bare")  # fmt: skip
+    _physicalized(
+        [
+            PhysicalizedClip(
+                RobotClip(bare.robot.qpos, 50, "hand-made:bare"),
+                bare.qvel,
+                (),
+                bare.action,
+                bare.torque,
+                bare.foot_force,
+                bare.reference_qpos,
+            )
+        ],
+        name="bare",
+    )
     assert main(["features", "--name", "bare"]) == 2
-    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error: ")]  # (the rest: progress bars)
-    assert len(err) == 3 and "no physicalized dataset" in err[0] and "'left_hand' is not a body" in err[1] and "no object tracks" in err[2]
+    err = [
+        line for line in capsys.readouterr().err.splitlines() if line.startswith("error: ")
+    ]  # (the rest: progress bars)
+    assert (
+        len(err) == 3
+        and "no physicalized dataset" in err[0]
+        and "'left_hand' is not a body" in err[1]
+        and "no object tracks" in err[2]
+    )
     assert not stage_dir("feat", "features").exists() and not stage_dir("bare", "features").exists()
 
 

@@ -7,8 +7,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
 from mocap_paths import SHARED_MOCAP, needs_shared
+
 from pipeline.foot_contact import FootContacts, detect_foot_contacts, find_foot_joints, keep_runs
 from pipeline.synthetic import default_demos
 
@@ -21,16 +21,25 @@ def demos():
 @pytest.mark.parametrize(
     "names, expected",
     [
-        (("pelvis", "left_ankle", "right_ankle", "left_foot", "right_foot"),
-         {"left": ("left_ankle", "left_foot"), "right": ("right_ankle", "right_foot")}),  # SMPL: foot = toe joint
-        (("Hips", "LeftFoot", "LeftToe", "RightFoot", "RightToe"),
-         {"left": ("LeftFoot", "LeftToe"), "right": ("RightFoot", "RightToe")}),  # LAFAN: foot = ankle
-        (("Hips", "LeftFoot", "LeftToeBase", "LeftToeBase_End", "RightFoot", "RightToeBase"),
-         {"left": ("LeftFoot", "LeftToeBase"), "right": ("RightFoot", "RightToeBase")}),
-        (("root", "L_Ankle", "L_Toe", "R_Ankle", "R_Toe"), {"left": ("L_Ankle", "L_Toe"), "right": ("R_Ankle", "R_Toe")}),
+        (
+            ("pelvis", "left_ankle", "right_ankle", "left_foot", "right_foot"),
+            {"left": ("left_ankle", "left_foot"), "right": ("right_ankle", "right_foot")},
+        ),  # SMPL: foot = toe joint
+        (
+            ("Hips", "LeftFoot", "LeftToe", "RightFoot", "RightToe"),
+            {"left": ("LeftFoot", "LeftToe"), "right": ("RightFoot", "RightToe")},
+        ),  # LAFAN: foot = ankle
+        (
+            ("Hips", "LeftFoot", "LeftToeBase", "LeftToeBase_End", "RightFoot", "RightToeBase"),
+            {"left": ("LeftFoot", "LeftToeBase"), "right": ("RightFoot", "RightToeBase")},
+        ),
+        (
+            ("root", "L_Ankle", "L_Toe", "R_Ankle", "R_Toe"),
+            {"left": ("L_Ankle", "L_Toe"), "right": ("R_Ankle", "R_Toe")},
+        ),
         (("hip", "LAnkle", "RAnkle"), {"left": ("LAnkle",), "right": ("RAnkle",)}),
     ],
-)  # fmt: skip
+)
 def test_foot_joints_by_name(names, expected):
     assert find_foot_joints(names) == expected
 

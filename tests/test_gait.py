@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from physicalize.rollout import initial_state, simulate
+from physicalize.synthetic_gait import gait_reference, stepping_in_place, walk_with_turn
 from physicalize.wbc import FOOT_BODIES, WholeBodyController
 from pipeline.scene import build_scene
-from physicalize.synthetic_gait import gait_reference, stepping_in_place, walk_with_turn
 
 
 @pytest.fixture(scope="module")

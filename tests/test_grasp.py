@@ -10,7 +10,15 @@ import mujoco
 import numpy as np
 import pytest
 
-from physicalize.grasp import GraspConfig, contact_friction, grasp_schedule, hand_geoms, hand_offsets, normal_force, press_force
+from physicalize.grasp import (
+    GraspConfig,
+    contact_friction,
+    grasp_schedule,
+    hand_geoms,
+    hand_offsets,
+    normal_force,
+    press_force,
+)
 from physicalize.reference import build_reference, place_on_floor
 from physicalize.rollout import initial_state, simulate
 from physicalize.wbc import HAND_BODIES, WholeBodyController, orientation_error
@@ -29,8 +37,15 @@ REACH, CLOSE, LIFT_START, LIFT_END, END = (10, 50), (50, 75), 90, 140, 220
 
 def _scene(mass: float = BOX_MASS):
     pedestal_top = BOX_POS[2] - BOX_HALF[2]
-    pedestal = SceneObject("pedestal", Primitive("box", (0.08, 0.08, pedestal_top / 2)), pose=(BOX_POS[0], 0.0, pedestal_top / 2, 1, 0, 0, 0), fixed=True)
-    box = SceneObject("box", Primitive("box", BOX_HALF), ObjectPhysics(mass=mass, friction=0.8), pose=(*BOX_POS, 1, 0, 0, 0))
+    pedestal = SceneObject(
+        "pedestal",
+        Primitive("box", (0.08, 0.08, pedestal_top / 2)),
+        pose=(BOX_POS[0], 0.0, pedestal_top / 2, 1, 0, 0, 0),
+        fixed=True,
+    )
+    box = SceneObject(
+        "box", Primitive("box", BOX_HALF), ObjectPhysics(mass=mass, friction=0.8), pose=(*BOX_POS, 1, 0, 0, 0)
+    )
     return build_scene([box, pedestal])
 
 
@@ -41,7 +56,8 @@ def scene():
 
 def _arm_ik(model, qpos: np.ndarray, targets: np.ndarray, rotations: np.ndarray | None = None) -> np.ndarray:
     """``qpos`` with both arms (7 joints each) moved by damped least squares so each hand point
-    (:func:`hand_offsets`) reaches ``targets`` (2, 3) and, if given, each hand the orientation ``rotations`` (2, 3, 3)."""
+    (:func:`hand_offsets`) reaches ``targets`` (2, 3) and, if given, each hand the orientation ``rotations`` (2, 3,
+    3)."""
     d = mujoco.MjData(model)
     q = qpos.copy()
     off = hand_offsets(model)
@@ -52,7 +68,11 @@ def _arm_ik(model, qpos: np.ndarray, targets: np.ndarray, rotations: np.ndarray 
         for k, side in enumerate(("left", "right")):
             hb = model.body(HAND_BODIES[k]).id
             p = d.xpos[hb] + d.xmat[hb].reshape(3, 3) @ off[k]
-            cols = [6 + G1_JOINT_NAMES.index(j) for j in G1_JOINT_NAMES if j.startswith(f"{side}_") and ("shoulder" in j or "elbow" in j or "wrist" in j)]
+            cols = [
+                6 + G1_JOINT_NAMES.index(j)
+                for j in G1_JOINT_NAMES
+                if j.startswith(f"{side}_") and ("shoulder" in j or "elbow" in j or "wrist" in j)
+            ]
             jp, jr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
             mujoco.mj_jac(model, d, jp, jr, p, hb)
             J, e = jp[:, cols], targets[k] - p
@@ -85,10 +105,17 @@ def _lift_clip(scene):
     key = {}
     for name, gap, dz in (("reach", 0.06, 0.0), ("close", 0.01, 0.0), ("lift", 0.01, LIFT)):
         y = side + gap
-        key[name] = _arm_ik(m, q0, np.array([BOX_POS + [0, y, dz], BOX_POS + [0, -y, dz]]), _hand_rotations(m, key.get("close")))
+        key[name] = _arm_ik(
+            m, q0, np.array([BOX_POS + [0, y, dz], BOX_POS + [0, -y, dz]]), _hand_rotations(m, key.get("close"))
+        )
     t = np.arange(END)
     s1, s2, s3 = _smooth(t, *REACH), _smooth(t, *CLOSE), _smooth(t, LIFT_START, LIFT_END)
-    qpos = q0 + s1[:, None] * (key["reach"] - q0) + s2[:, None] * (key["close"] - key["reach"]) + s3[:, None] * (key["lift"] - key["close"])
+    qpos = (
+        q0
+        + s1[:, None] * (key["reach"] - q0)
+        + s2[:, None] * (key["close"] - key["reach"])
+        + s3[:, None] * (key["lift"] - key["close"])
+    )
     box = np.tile(np.r_[BOX_POS, 1.0, 0, 0, 0], (END, 1))
     box[:, 2] += LIFT * s3
     contacts = np.zeros((END, 3), bool)
@@ -105,8 +132,12 @@ def _hand_centres_and_gaps(scene, qpos: np.ndarray, box_pose: np.ndarray) -> lis
     out = []
     for k, hb in enumerate(HAND_BODIES):
         i = m.body(hb).id
-        out.append((d.xpos[i] + d.xmat[i].reshape(3, 3) @ hand_offsets(m)[k],
-                    mujoco.mj_geomDistance(m, d, hand_geoms(m)[k][0], m.geom("box_col0").id, 0.1, None)))
+        out.append(
+            (
+                d.xpos[i] + d.xmat[i].reshape(3, 3) @ hand_offsets(m)[k],
+                mujoco.mj_geomDistance(m, d, hand_geoms(m)[k][0], m.geom("box_col0").id, 0.1, None),
+            )
+        )
     return out
 
 
@@ -122,7 +153,9 @@ def test_contact_friction_follows_mujoco_priority(scene):
     d.qpos[:36], d.qpos[scene.object_qpos_adr["box"] : scene.object_qpos_adr["box"] + 7] = qpos[-1], box[-1]
     d.qpos[scene.object_qpos_adr["box"] + 1] += 0.02  # push the box into the left hand
     mujoco.mj_forward(m, d)
-    pairs = [(c.dim, c.friction[0]) for c in d.contact[: d.ncon] if {c.geom1, c.geom2} & {hg} and {c.geom1, c.geom2} & {bg}]
+    pairs = [
+        (c.dim, c.friction[0]) for c in d.contact[: d.ncon] if {c.geom1, c.geom2} & {hg} and {c.geom1, c.geom2} & {bg}
+    ]
     assert pairs and all(dim == 3 and mu == pytest.approx(0.8) for dim, mu in pairs)
 
 
@@ -133,7 +166,9 @@ def test_normal_force_carries_the_load_by_friction():
     assert ok and N == pytest.approx(2.0 * 7.5 / 0.8)
     N, ok = normal_force(np.array([0.0, 0.0, 1.0]), n, 0.8, cfg)
     assert ok and N == cfg.min_normal_force
-    N, ok = normal_force(np.array([0.0, 0.0, 40.0]), n, 0.8, cfg)  # 100 N with the safety factor: capped, friction still holds
+    N, ok = normal_force(
+        np.array([0.0, 0.0, 40.0]), n, 0.8, cfg
+    )  # 100 N with the safety factor: capped, friction still holds
     assert ok and N == cfg.max_normal_force
     N, ok = normal_force(np.array([0.0, 0.0, 50.0]), n, 0.8, cfg)  # mu N_max = 48 N < 50 N: slips
     assert not ok and N == cfg.max_normal_force
@@ -171,7 +206,9 @@ def test_schedule_squeezes_opposite_sides_of_the_box(scene):
     # axis grip_above over the box's centre of mass (the reference hands are level with it), nothing else
     for k, (centre, gap) in enumerate(_hand_centres_and_gaps(scene, qpos[t], box[t])):
         assert -0.005 < gap < 0.012  # the reference leaves the hands about 1 cm off the sides
-        assert np.allclose(g.point[t, k] - centre - [0, 0, cfg.grip_above], (gap + cfg.depth) * g.normal[t, k], atol=2e-3)
+        assert np.allclose(
+            g.point[t, k] - centre - [0, 0, cfg.grip_above], (gap + cfg.depth) * g.normal[t, k], atol=2e-3
+        )
     # forces: squeezes cancel, the hands carry the weight once lifted, none before the lift
     assert np.allclose(g.force[t].sum(axis=0), [0, 0, BOX_MASS * 9.81], atol=0.05)
     assert g.force[t, 0, 1] < -cfg.min_normal_force + 1e-6 and g.friction_ok.all()
@@ -192,7 +229,7 @@ def test_without_hand_contacts_nothing_is_held_and_the_hands_are_kept_off(scene)
     assert not g.grasped.any() and not g.force.any()
     t = LIFT_END + 10
     assert g.clear[t].all() and (g.weight[t] == cfg.w_clear).all()
-    assert not g.clear[:REACH[0]].any()  # far from the box: the reference hand targets, untouched
+    assert not g.clear[: REACH[0]].any()  # far from the box: the reference hand targets, untouched
     for k, (centre, gap) in enumerate(_hand_centres_and_gaps(scene, qpos[t], box[t])):
         assert gap < 0.02 and np.linalg.norm(g.point[t, k] - centre) == pytest.approx(cfg.clearance - gap, abs=0.005)
         assert abs(g.point[t, k, 1]) > abs(centre[1])  # moved outward, away from the box's side
@@ -202,7 +239,8 @@ def test_without_hand_contacts_nothing_is_held_and_the_hands_are_kept_off(scene)
 
 
 def _track_box(scene, qpos, box, contacts, cfg: GraspConfig | None = GraspConfig()):
-    """(rollout, simulated box poses, grasp schedule) of tracking ``qpos`` with the box ``box``; ``cfg`` None: no grasp."""
+    """(rollout, simulated box poses, grasp schedule) of tracking ``qpos`` with the box ``box``; ``cfg`` None: no
+    grasp."""
     ref = build_reference(scene.model, qpos, 50)
     if cfg is not None:
         ref.grasp = grasp_schedule(scene, ref, LINKS, contacts, {"box": box}, cfg)

@@ -34,7 +34,13 @@ END = 200
 
 def _scene(mass: float = 1.0):
     top = POS[2] - HALF[2]
-    pedestal = SceneObject("pedestal", Primitive("box", (0.25, 0.25, top / 2)), ObjectPhysics(friction=MU), pose=(POS[0] + 0.1, 0.0, top / 2, 1, 0, 0, 0), fixed=True)
+    pedestal = SceneObject(
+        "pedestal",
+        Primitive("box", (0.25, 0.25, top / 2)),
+        ObjectPhysics(friction=MU),
+        pose=(POS[0] + 0.1, 0.0, top / 2, 1, 0, 0, 0),
+        fixed=True,
+    )
     box = SceneObject("box", Primitive("box", HALF), ObjectPhysics(mass=mass, friction=MU), pose=(*POS, 1, 0, 0, 0))
     return build_scene([box, pedestal])
 
@@ -70,7 +76,8 @@ def test_an_unlabelled_hand_is_kept_off_the_box(scene):
 
 
 def _push_clip(scene):
-    """Both hands behind the box (-x side): reach (frames 10-50), close to 1 cm (50-70), push it +12 cm (90-150), hold."""
+    """Both hands behind the box (-x side): reach (frames 10-50), close to 1 cm (50-70), push it +12 cm (90-150),
+    hold."""
     m = scene.model
     q0 = place_on_floor(m, default_qpos(scene.profile)[None])[0]
     off = HALF[0] + 0.035 + 0.11  # the hand point sits 11 cm behind the hand's front (its offset), pointing forward
@@ -80,7 +87,12 @@ def _push_clip(scene):
         key[name] = _arm_ik(m, q0, np.array([[x, 0.07, POS[2]], [x, -0.07, POS[2]]]))
     t = np.arange(END)
     s1, s2, s3 = _smooth(t, 10, 50), _smooth(t, 50, 70), _smooth(t, 90, 150)
-    qpos = q0 + s1[:, None] * (key["reach"] - q0) + s2[:, None] * (key["close"] - key["reach"]) + s3[:, None] * (key["push"] - key["close"])
+    qpos = (
+        q0
+        + s1[:, None] * (key["reach"] - q0)
+        + s2[:, None] * (key["close"] - key["reach"])
+        + s3[:, None] * (key["push"] - key["close"])
+    )
     box = np.tile(np.r_[POS, 1.0, 0, 0, 0], (END, 1))
     box[:, 0] += PUSH * s3
     contacts = np.zeros((END, 3), bool)
@@ -120,7 +132,12 @@ def test_a_two_hand_grip_lies_on_one_line_over_the_centre_of_mass(scene):
     d = mujoco.MjData(m)
     d.qpos[:36] = qpos[t]
     mujoco.mj_kinematics(m, d)
-    centre = np.array([d.xpos[m.body(b).id] + d.xmat[m.body(b).id].reshape(3, 3) @ hand_offsets(m)[k] for k, b in enumerate(HAND_BODIES)])
+    centre = np.array(
+        [
+            d.xpos[m.body(b).id] + d.xmat[m.body(b).id].reshape(3, 3) @ hand_offsets(m)[k]
+            for k, b in enumerate(HAND_BODIES)
+        ]
+    )
     assert abs(centre[0, 2] - centre[1, 2]) > 0.04  # the reference hands are ~5 cm apart in height
     p = g.attached[t]
     n = g.normal[t, 0]

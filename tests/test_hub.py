@@ -32,7 +32,17 @@ class LocalHub:
         (self.base / repo_id).mkdir(parents=True, exist_ok=exist_ok)
         return f"https://hub.local/datasets/{repo_id}"
 
-    def upload_folder(self, *, repo_id, folder_path, repo_type=None, ignore_patterns=None, allow_patterns=None, commit_message=None, **_):
+    def upload_folder(
+        self,
+        *,
+        repo_id,
+        folder_path,
+        repo_type=None,
+        ignore_patterns=None,
+        allow_patterns=None,
+        commit_message=None,
+        **_,
+    ):
         self.calls.append(("upload_folder", repo_id, repo_type))
         src = Path(folder_path)
         files = [p.relative_to(src).as_posix() for p in src.rglob("*") if p.is_file()]
@@ -52,9 +62,15 @@ class LocalHub:
 @pytest.fixture
 def dataset(tmp_path):
     rng = np.random.default_rng(0)
-    eps = [Episode(t, {"observation.state": rng.normal(size=(T, 3)).astype(np.float32), "contact": rng.random((T, 2)) < 0.5})
-           for t, T in (("walk", 6), ("sit", 4))]  # fmt: skip
-    card = DatasetCard("Hub test", description="Two episodes.", provenance=["unit test"], synthetic=True, actuator_profile="mjlab")
+    eps = [
+        Episode(
+            t, {"observation.state": rng.normal(size=(T, 3)).astype(np.float32), "contact": rng.random((T, 2)) < 0.5}
+        )
+        for t, T in (("walk", 6), ("sit", 4))
+    ]
+    card = DatasetCard(
+        "Hub test", description="Two episodes.", provenance=["unit test"], synthetic=True, actuator_profile="mjlab"
+    )
     root = write_dataset(tmp_path / "ds", "tester/ds", 30, FEATURES, eps, card=card)
     (root / ".cache").mkdir()
     (root / ".cache/leftover.lock").write_text("x")
@@ -69,9 +85,9 @@ def test_publish_then_load(tmp_path, dataset):
     assert hub.calls[0] == ("create_repo", "tester/ds", "dataset", True) and ("tester/ds", "v3.0") in hub.tags
     remote = tmp_path / "hub/tester/ds"
     assert not (remote / ".cache").exists()
-    assert sorted(p.relative_to(dataset).as_posix() for p in dataset.rglob("*") if p.is_file() and ".cache" not in p.parts) == sorted(
-        p.relative_to(remote).as_posix() for p in remote.rglob("*") if p.is_file()
-    )
+    assert sorted(
+        p.relative_to(dataset).as_posix() for p in dataset.rglob("*") if p.is_file() and ".cache" not in p.parts
+    ) == sorted(p.relative_to(remote).as_posix() for p in remote.rglob("*") if p.is_file())
     card = metadata_load(remote / "README.md")
     assert card["tags"][:3] == ["LeRobot", "unitree-g1", "humanoid"] and "synthetic" in card["tags"]
     assert card["task_categories"] == ["robotics"] and card["license"] == "apache-2.0"

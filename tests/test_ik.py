@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import math
 
+import bench_scripts
 import mink
 import mujoco
 import numpy as np
 import pytest
 
-import bench_scripts
 from pipeline.errors import InputError
 from pipeline.geometry import Primitive
 from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES, default_qpos, joint_limits
@@ -146,7 +146,9 @@ def test_feet_in_contact_are_pinned_flat_on_the_ground(plain, anchor):
         pos[:, k, 0] += 0.03 * s[:, 0]
         pos[:, k, 2] += 0.02 * np.sin(6 * math.pi * s[:, 0])
     pos[:15, G1_LINK_NAMES.index("right_ankle_roll_link"), 2] += 0.05 * (1 - s[:15, 0] / s[15, 0])  # swing down
-    targets = IKTargets(targets.body_names, pos, targets.quat, targets.pos_weight, targets.rot_weight, FPS, 1.0, contact)
+    targets = IKTargets(
+        targets.body_names, pos, targets.quat, targets.pos_weight, targets.rot_weight, FPS, 1.0, contact
+    )
     q = G1Retargeter(plain, IKConfig(pin_anchor=anchor)).retarget(targets)
     xy, sole, tilt = _feet(plain.model, q)
     for side in (0, 1):

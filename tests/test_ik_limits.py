@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import math
 
+import bench_scripts
 import mink
 import mujoco
 import numpy as np
 import pytest
 
-import bench_scripts
 from pipeline.ik_limits import FloorLimit, FrameVelocityLimit, SeparationLimit, pairs_kept_apart_by_joint_limits
 from pipeline.robot import G1_JOINT_NAMES
 from pipeline.scene import build_scene
@@ -45,7 +45,9 @@ def test_separation_limit_rows_are_distance_rates_and_push_out(plain, lift):
     cfg.data.qpos[2] += lift
     cfg.update()
     floor, foot = m.geom("floor").id, m.geom("left_foot4_collision").id
-    lim = SeparationLimit(m, [([foot], [floor])], gain=0.5, minimum_distance_from_collisions=0.0, collision_detection_distance=0.05)
+    lim = SeparationLimit(
+        m, [([foot], [floor])], gain=0.5, minimum_distance_from_collisions=0.0, collision_detection_distance=0.05
+    )
     G, h = lim.compute_qp_inequalities(cfg, 1.0)
     d = mujoco.mj_geomDistance(m, cfg.data, floor, foot, 1.0, None)
     assert G.shape == (1, m.nv) and h[0] == pytest.approx(0.5 * d)
@@ -61,7 +63,9 @@ def test_pelvis_is_checked_against_objects_and_floor(plain):
     m = ik_model(scene)
     pelvis, box, floor = m.geom("pelvis_collision").id, m.geom("box_col0").id, m.geom("floor").id
     lim = SeparationLimit(m, [([pelvis], [box, floor])])
-    assert sorted(lim.geom_id_pairs) == sorted([(min(pelvis, box), max(pelvis, box)), (min(pelvis, floor), max(pelvis, floor))])
+    assert sorted(lim.geom_id_pairs) == sorted(
+        [(min(pelvis, box), max(pelvis, box)), (min(pelvis, floor), max(pelvis, floor))]
+    )
     excluded = SeparationLimit(m, [([pelvis], [m.geom("left_hip_collision").id])])  # <exclude> in g1.xml
     assert excluded.geom_id_pairs == []
 
@@ -86,7 +90,10 @@ def test_floor_limit_matches_mujoco_distances(plain, lift):
     q[3:7] = [math.cos(0.05), math.sin(0.05), 0.0, 0.0]  # rolled 0.1 rad: feet on an edge
     cfg = mink.Configuration(m, q)
     floor = m.geom("floor").id
-    geoms = [m.geom(n).id for n in ("left_foot1_collision", "left_foot4_collision", "right_shin_collision", "pelvis_collision")]
+    geoms = [
+        m.geom(n).id
+        for n in ("left_foot1_collision", "left_foot4_collision", "right_shin_collision", "pelvis_collision")
+    ]
     lim = FloorLimit(m, geoms, floor, gain=1.0, minimum_distance=0.0, detection_distance=10.0)
     G, h = lim.compute_qp_inequalities(cfg, 1.0)
     assert G.shape == (8, m.nv)  # both ends of every capsule, the sphere twice
@@ -111,4 +118,11 @@ def test_pairs_kept_apart_by_joint_limits_are_the_ankle_ones(plain):
     d.qpos[p.qposadr[0]], d.qpos[r.qposadr[0]] = m.jnt_range[p.id, 0], m.jnt_range[r.id, 1]  # the closest corner
     mujoco.mj_kinematics(m, d)
     assert 0.0 < mujoco.mj_geomDistance(m, d, brace, foot, 1.0, None) < 0.01
-    assert len(SeparationLimit(m, [(list(plain.robot_geom_ids), list(plain.robot_geom_ids))], skip_kept_apart=True).geom_id_pairs) == len(lim.geom_id_pairs) - 28
+    assert (
+        len(
+            SeparationLimit(
+                m, [(list(plain.robot_geom_ids), list(plain.robot_geom_ids))], skip_kept_apart=True
+            ).geom_id_pairs
+        )
+        == len(lim.geom_id_pairs) - 28
+    )

@@ -65,8 +65,14 @@ def _robot_clip(objects=None) -> RobotClip:
     qpos[:, 2], qpos[:, 3] = 0.79, 1.0
     qpos[:, 7 + G1_JOINT_NAMES.index("left_elbow_joint")] = 0.5 * np.sin(np.arange(T) / 3)
     contacts = (np.arange(T) >= 10)[:, None]
-    return RobotClip(qpos, FPS, "test", objects=(_box_track(),) if objects is None else objects,
-                     contact_links=("left_wrist_yaw_link",), contacts=contacts)  # fmt: skip
+    return RobotClip(
+        qpos,
+        FPS,
+        "test",
+        objects=(_box_track(),) if objects is None else objects,
+        contact_links=("left_wrist_yaw_link",),
+        contacts=contacts,
+    )
 
 
 def _check_times(msgs: list[tuple[int, object]]) -> None:
@@ -84,8 +90,12 @@ def test_robot_log_topics_times_and_poses(tmp_path):
     path = write_robot_log(clip, tmp_path / "sub" / "robot.mcap")
     assert path == tmp_path / "sub" / "robot.mcap" and path.is_file()
     schemas, msgs = _read(path)
-    assert schemas == {"/tf": "foxglove.FrameTransforms", "/scene": "foxglove.SceneUpdate",
-                       "/contact_markers": "foxglove.SceneUpdate", "/contacts": "lessmimic.Contacts"}  # fmt: skip
+    assert schemas == {
+        "/tf": "foxglove.FrameTransforms",
+        "/scene": "foxglove.SceneUpdate",
+        "/contact_markers": "foxglove.SceneUpdate",
+        "/contacts": "lessmimic.Contacts",
+    }
     assert len(msgs["/scene"]) == 1 and all(len(msgs[t]) == T for t in ("/tf", "/contacts", "/contact_markers"))
     _check_times(msgs["/tf"])
     elbow_rot = []
@@ -143,7 +153,10 @@ def test_chair_and_mesh_objects_are_drawn(tmp_path):
     mesh_file = tmp_path / "ball.stl"
     trimesh.creation.icosphere(subdivisions=5).export(mesh_file)  # 20480 faces
     pose = np.tile([0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0], (T, 1))
-    objects = (ObjectTrack("chair", Chair(), pose), ObjectTrack("ball", MeshGeometry(str(mesh_file), scale=(0.2, 0.2, 0.2)), pose))
+    objects = (
+        ObjectTrack("chair", Chair(), pose),
+        ObjectTrack("ball", MeshGeometry(str(mesh_file), scale=(0.2, 0.2, 0.2)), pose),
+    )
     _, msgs = _read(write_robot_log(_robot_clip(objects), tmp_path / "objects.mcap"))
     scene = {e.id: e for e in msgs["/scene"][0][1].entities}
     assert len(scene["object/chair"].cubes) == 6

@@ -68,7 +68,12 @@ def test_demo_layout_clips_distance_and_rotates_grad_into_the_body():
 
 def test_feature_names_are_per_link():
     names = feature_names(("pelvis", "torso_link"))
-    assert len(names) == 20 and names[0] == "pelvis.phi" and names[10] == "torso_link.phi" and names[-1] == "torso_link.v_tan_z"
+    assert (
+        len(names) == 20
+        and names[0] == "pelvis.phi"
+        and names[10] == "torso_link.phi"
+        and names[-1] == "torso_link.v_tan_z"
+    )
 
 
 @pytest.mark.parametrize("shape", ["box", "cylinder"])
@@ -91,4 +96,3 @@ def test_same_approach_to_a_scaled_object_gives_the_same_traces_near_contact(sha
         np.testing.assert_allclose(other[near], traces[0][near], atol=1e-9)
     np.testing.assert_allclose(traces[0][:, 0], x, atol=1e-9)
     np.testing.assert_allclose(traces[0][near, 4:7], v[near, 0], atol=1e-9)  # all the motion is along the normal
-

@@ -6,8 +6,7 @@ import pytest
 
 from pipeline.errors import InputError
 from pipeline.link_motion import link_motion
-from pipeline.robot import g1_model
-from pipeline.robot import G1_LINK_NAMES, actuator_profile, default_qpos
+from pipeline.robot import G1_LINK_NAMES, actuator_profile, default_qpos, g1_model
 
 
 def _trajectory(T=40, fps=200.0):
@@ -17,8 +16,15 @@ def _trajectory(T=40, fps=200.0):
     q[:, 0] += 0.4 * t
     q[:, 1] += 0.1 * np.sin(3 * t)
     yaw, roll = 0.8 * t, 0.1 * np.sin(5 * t)
-    q[:, 3:7] = np.stack([np.cos(yaw / 2) * np.cos(roll / 2), np.cos(yaw / 2) * np.sin(roll / 2), -np.sin(yaw / 2) * np.sin(roll / 2),
-                          np.sin(yaw / 2) * np.cos(roll / 2)], 1)  # fmt: skip
+    q[:, 3:7] = np.stack(
+        [
+            np.cos(yaw / 2) * np.cos(roll / 2),
+            np.cos(yaw / 2) * np.sin(roll / 2),
+            -np.sin(yaw / 2) * np.sin(roll / 2),
+            np.sin(yaw / 2) * np.cos(roll / 2),
+        ],
+        1,
+    )
     q[:, 7:] += 0.3 * np.sin(2 * t[:, None] + np.arange(29))
     m = g1_model()
     v = np.zeros((T, 35))
@@ -34,7 +40,9 @@ def test_link_velocity_matches_finite_differences_of_positions():
     assert motion.pos.shape == (40, 14, 3) and motion.rot.shape == (40, 14, 3, 3)
     fd = (motion.pos[2:] - motion.pos[:-2]) * fps / 2
     np.testing.assert_allclose(motion.vel[1:-1], fd, atol=5e-3)
-    np.testing.assert_allclose(np.einsum("tkij,tkil->tkjl", motion.rot, motion.rot), np.broadcast_to(np.eye(3), (40, 14, 3, 3)), atol=1e-9)
+    np.testing.assert_allclose(
+        np.einsum("tkij,tkil->tkjl", motion.rot, motion.rot), np.broadcast_to(np.eye(3), (40, 14, 3, 3)), atol=1e-9
+    )
     assert np.abs(motion.vel).max() > 0.3  # the test moves the links
 
 

@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from functools import lru_cache
+from functools import cache
 
 import mujoco
 import numpy as np
 import pytest
+from mocap_paths import SHARED_MOCAP, needs_shared
 from scipy.spatial.transform import Rotation
 
 from pipeline.clip import HumanClip, Skeleton
@@ -21,16 +22,24 @@ from pipeline.errors import InputError
 from pipeline.robot import g1_xml_path
 from pipeline.rotations import rotation_from_wxyz, wxyz_from_rotation
 from retarget.frames import body_axes, rest_positions
-from retarget.mapping import CORE_BODIES, G1_ROLES, MAPPINGS_DIR, g1_rest, human_points, load_mapping, mapping_files, read_spec
+from retarget.mapping import (
+    CORE_BODIES,
+    G1_ROLES,
+    MAPPINGS_DIR,
+    g1_rest,
+    human_points,
+    load_mapping,
+    mapping_files,
+    read_spec,
+)
 from retarget.scaling import compute_scale, human_to_targets
-from mocap_paths import SHARED_MOCAP, needs_shared
 
 OMOMO = SHARED_MOCAP / "omomo" / "sub3_largebox_003.pt"
 PYMO = SHARED_MOCAP / "bvh" / "pymo_walk_120hz.bvh"
 LAFAN = SHARED_MOCAP / "bvh" / "lafan1_dance1_subject2_10frames.bvh"
 
 
-@lru_cache(maxsize=None)
+@cache
 def real_clip(name: str) -> HumanClip:
     from pipeline.readers import read_clip
 
@@ -162,7 +171,9 @@ def upright_rest_clip(clip: HumanClip, yaw_deg: float) -> HumanClip:
     pos = np.repeat((rest @ Q.T)[None], 2, axis=0)
     pos[..., 2] -= pos[0, :, 2].min()
     quat = np.repeat(wxyz_from_rotation(Rotation.from_matrix(np.repeat(Q[None], len(rest), 0)))[None], 2, axis=0)
-    return HumanClip(clip.skeleton, pos, 30.0, clip.source + "#rest", subject_height=clip.subject_height, joint_quat=quat)
+    return HumanClip(
+        clip.skeleton, pos, 30.0, clip.source + "#rest", subject_height=clip.subject_height, joint_quat=quat
+    )
 
 
 @pytest.mark.parametrize("name", [p for p in CLIPS if p.values[0] != "lafan1"])
@@ -194,8 +205,12 @@ def test_segment_directions_are_carried_over_exactly(name):
     m = load_mapping(clip.skeleton)
     tg, P, g = human_to_targets(clip, m), human_points(clip.joint_pos, clip.skeleton, m), g1_rest()
     for s in ("left", "right"):
-        for body, child in (("hip_pitch_link", "knee_link"), ("knee_link", "ankle_roll_link"),
-                            ("shoulder_roll_link", "elbow_link"), ("elbow_link", "wrist_yaw_link")):  # fmt: skip
+        for body, child in (
+            ("hip_pitch_link", "knee_link"),
+            ("knee_link", "ankle_roll_link"),
+            ("shoulder_roll_link", "elbow_link"),
+            ("elbow_link", "wrist_yaw_link"),
+        ):
             b, c = f"{s}_{body}", f"{s}_{child}"
             axis = g.rot[b].T @ (g.pos[c] - g.pos[b])
             mapped = rot(tg.quat[:, tg.body_names.index(b)]) @ (axis / np.linalg.norm(axis))
@@ -225,7 +240,9 @@ def test_positions_only_clip_gets_comparable_orientations(name):
         k = with_quat.body_names.index(b)
         assert np.median(angle_deg(rot(with_quat.quat[:, k]), rot(without.quat[:, k]))) < 8.0
     arms = [k for k, b in enumerate(without.body_names) if G1_ROLES[b].kind in ("upper_arm", "forearm", "hand")]
-    assert (without.rot_weight[arms] == 0).all() and (with_quat.rot_weight[arms] == np.array([m.links[k].rot_weight for k in arms])).all()
+    assert (without.rot_weight[arms] == 0).all() and (
+        with_quat.rot_weight[arms] == np.array([m.links[k].rot_weight for k in arms])
+    ).all()
 
 
 @needs_shared

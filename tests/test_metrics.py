@@ -10,8 +10,8 @@ import time
 import mujoco
 import numpy as np
 import pytest
-
 from mocap_paths import SHARED_MOCAP, needs_shared
+
 from pipeline.clip import HumanClip, ObjectTrack, RobotClip
 from pipeline.geometry import Primitive
 from pipeline.metrics import METRIC_KEYS, evaluate_file, ground_clearance, retarget_metrics, scene_for, summarise
@@ -143,7 +143,9 @@ def test_joint_speed_of_a_sinusoid(stand):
     n, f, a = 101, 1.0, 0.3
     q = np.repeat(stand[None], n, 0)
     w = 2 * np.pi * f
-    q[:, _joint("left_elbow_joint")] = 0.5 + a * np.sin(w * (np.arange(n) - 0.5) / FPS)  # steepest between frames 0 and 1
+    q[:, _joint("left_elbow_joint")] = 0.5 + a * np.sin(
+        w * (np.arange(n) - 0.5) / FPS
+    )  # steepest between frames 0 and 1
     r = retarget_metrics(_clip(q))
     assert r["max_joint_speed_radps"] == pytest.approx(2 * a * FPS * np.sin(w / (2 * FPS)), rel=1e-9)
     assert r["max_joint_speed_radps"] == pytest.approx(a * w, rel=1e-3)
@@ -186,7 +188,9 @@ def test_contact_preservation_hand_1cm_vs_5cm(stand):
     assert math.isnan(retarget_metrics(_clip(q), _human(flags={"left_wrist": touch}))["contact_preservation_frac"])
     assert math.isnan(retarget_metrics(_clip(q))["contact_preservation_frac"])
     # a custom link map: the right hand is far from the box
-    r = retarget_metrics(_clip(q, box), _human(flags={"left_wrist": touch}), link_map={"left_wrist": "right_wrist_yaw_link"})
+    r = retarget_metrics(
+        _clip(q, box), _human(flags={"left_wrist": touch}), link_map={"left_wrist": "right_wrist_yaw_link"}
+    )
     assert r["contact_preservation_frac"] == pytest.approx(1 - 16 / T)
 
 
@@ -197,10 +201,22 @@ def test_self_collision_arm_into_torso(stand):
 
 
 def test_summarise_weights_by_frames_and_skips_nan():
-    a = dict.fromkeys(METRIC_KEYS, 0.0) | {"frames": 100, "fps": 50.0, "seconds_wall": 1.0, "contact_preservation_frac": 1.0,
-                                           "object_penetration_max_m": 0.01, "ground_penetration_frac_1cm": 0.5}  # fmt: skip
-    b = dict.fromkeys(METRIC_KEYS, 0.0) | {"frames": 300, "fps": 50.0, "seconds_wall": float("nan"), "contact_preservation_frac": float("nan"),
-                                           "object_penetration_max_m": 0.03, "ground_penetration_frac_1cm": 0.1}  # fmt: skip
+    a = dict.fromkeys(METRIC_KEYS, 0.0) | {
+        "frames": 100,
+        "fps": 50.0,
+        "seconds_wall": 1.0,
+        "contact_preservation_frac": 1.0,
+        "object_penetration_max_m": 0.01,
+        "ground_penetration_frac_1cm": 0.5,
+    }
+    b = dict.fromkeys(METRIC_KEYS, 0.0) | {
+        "frames": 300,
+        "fps": 50.0,
+        "seconds_wall": float("nan"),
+        "contact_preservation_frac": float("nan"),
+        "object_penetration_max_m": 0.03,
+        "ground_penetration_frac_1cm": 0.1,
+    }
     s = summarise([a, b])
     assert s["ground_penetration_frac_1cm"] == pytest.approx((0.5 * 100 + 0.1 * 300) / 400)
     assert s["contact_preservation_frac"] == 1.0 and s["object_penetration_max_m"] == 0.03

@@ -21,7 +21,9 @@ def _walk(T=150, fps=50.0, yaw_deg=90.0, speed=1.0):
 
 def test_projected_gravity():
     q, _, _ = _walk(3, yaw_deg=0.0)
-    np.testing.assert_allclose(projected_gravity(q[:1]), [Rotation.from_euler("y", 10, degrees=True).inv().apply([0, 0, -1])], atol=1e-12)
+    np.testing.assert_allclose(
+        projected_gravity(q[:1]), [Rotation.from_euler("y", 10, degrees=True).inv().apply([0, 0, -1])], atol=1e-12
+    )
     q[:, 3:7] = [1.0, 0, 0, 0]
     np.testing.assert_allclose(projected_gravity(q), np.tile([0, 0, -1.0], (3, 1)), atol=1e-12)
 

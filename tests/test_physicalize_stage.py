@@ -15,7 +15,7 @@ from pipeline.clip_dataset import robot_clips_to_episodes
 from pipeline.dataset import write_dataset
 from pipeline.geometry import Primitive
 from pipeline.ingest import stage_dir
-from pipeline.robot import default_qpos, actuator_profile
+from pipeline.robot import actuator_profile, default_qpos
 from pipeline.scene import build_scene
 
 BOX = Primitive("box", (0.15, 0.15, 0.15))
@@ -27,8 +27,16 @@ def _clips() -> list[RobotClip]:
     jump = stand.copy()
     jump[30:, 0] += 0.6  # the reference teleports 0.6 m: no physical motion follows it
     box = np.tile([0.8, 0.0, 0.15, 1.0, 0.0, 0.0, 0.0], (60, 1))
-    return [RobotClip(q, 50, f"hand-made:{name}", objects=(ObjectTrack("box", BOX, box.copy(), None, 1.0, "hand-made"),), task=name)
-            for name, q in (("stand", stand), ("teleport", jump))]  # fmt: skip
+    return [
+        RobotClip(
+            q,
+            50,
+            f"hand-made:{name}",
+            objects=(ObjectTrack("box", BOX, box.copy(), None, 1.0, "hand-made"),),
+            task=name,
+        )
+        for name, q in (("stand", stand), ("teleport", jump))
+    ]
 
 
 @pytest.fixture
@@ -53,8 +61,15 @@ def test_valid_clip_written_invalid_one_reported(retargeted, capsys):
     assert report["summary"]["valid_frac"] == 0.5 and report["summary"]["episodes_written"] == 1
     ds = LeRobotDataset("lessmimic/hand-physicalized", root=root)
     assert ds.num_episodes == 1 and ds.num_frames == 60
-    for key, dim in (("action", 29), ("observation.torque", 29), ("observation.state", 36), ("observation.qvel", 35),
-                     ("object.box.pose", 7), ("object.box.vel", 6), ("reference.state", 36)):  # fmt: skip
+    for key, dim in (
+        ("action", 29),
+        ("observation.torque", 29),
+        ("observation.state", 36),
+        ("observation.qvel", 35),
+        ("object.box.pose", 7),
+        ("object.box.vel", 6),
+        ("reference.state", 36),
+    ):
         assert tuple(ds.features[key]["shape"]) == (dim,)
     assert "mjlab" in (root / "README.md").read_text()
     logs = retargeted / "hand" / "logs" / "physicalized"
@@ -62,13 +77,18 @@ def test_valid_clip_written_invalid_one_reported(retargeted, capsys):
     written = {p: p.stat().st_mtime_ns for p in retargeted.rglob("*")}
     capsys.readouterr()
     assert main(["physicalize", "--name", "hand"]) == 0  # same input and options: up to date, nothing rewritten
-    assert capsys.readouterr().out == "physicalize: datasets/hand/physicalized/ is up to date (same input and options); nothing to do\n"
+    assert (
+        capsys.readouterr().out
+        == "physicalize: datasets/hand/physicalized/ is up to date (same input and options); nothing to do\n"
+    )
     assert {p: p.stat().st_mtime_ns for p in retargeted.rglob("*")} == written
     assert main(["physicalize", "--name", "hand", "--keep-invalid"]) == 2  # another option: needs --overwrite
     assert "physicalized: dataset: already exists; pass --overwrite" in capsys.readouterr().err
     assert main(["physicalize", "--name", "hand", "--overwrite", "--keep-invalid"]) == 0
     assert LeRobotDataset("lessmimic/hand-physicalized", root=root).num_episodes == 2
-    features, episodes = robot_clips_to_episodes(_clips()[:1])  # another retargeted dataset: its output is not up to date
+    features, episodes = robot_clips_to_episodes(
+        _clips()[:1]
+    )  # another retargeted dataset: its output is not up to date
     write_dataset(stage_dir("hand", "retargeted"), "lessmimic/hand-retargeted", 50, features, episodes, overwrite=True)
     assert main(["physicalize", "--name", "hand", "--keep-invalid"]) == 2
 
@@ -83,7 +103,9 @@ def test_the_next_gain_set_is_tried_when_a_rollout_is_invalid():
     _, _, f, _ = physicalize_clip(stand, gains=(weak, weak))
     assert not f["valid"] and (f["teacher_gains"], f["teacher_attempts"]) == (0, 2) and "; gain set 1: " in f["reason"]
     robot, _, f, _ = physicalize_clip(stand)
-    assert f["valid"] and (f["teacher_gains"], f["teacher_attempts"]) == (0, 1) and robot.provenance["teacher_gains"] == 0
+    assert (
+        f["valid"] and (f["teacher_gains"], f["teacher_attempts"]) == (0, 1) and robot.provenance["teacher_gains"] == 0
+    )
 
 
 @needs_shared
@@ -94,7 +116,9 @@ def test_a_reference_the_hands_cannot_follow_is_not_retried():
 
     clip = retarget_clip(read_clips(SHARED_MOCAP / "intermimic" / "sub2_largetable_000.pt")[0])[0]
     _, _, f, _ = physicalize_clip(clip)
-    assert f["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT and not f["valid"] and f["teacher_attempts"] == 1
+    assert (
+        f["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT and not f["valid"] and f["teacher_attempts"] == 1
+    )
 
 
 def test_bad_arguments_are_one_line_errors(retargeted, capsys):
@@ -102,7 +126,12 @@ def test_bad_arguments_are_one_line_errors(retargeted, capsys):
     assert main(["physicalize", "--name", "missing"]) == 2
     assert main(["physicalize", "--name", "hand", "--teacher", "residual"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 3 and "unknown actuator profile" in err[0] and "no retargeted dataset" in err[1] and "unknown teacher" in err[2]
+    assert (
+        len(err) == 3
+        and "unknown actuator profile" in err[0]
+        and "no retargeted dataset" in err[1]
+        and "unknown teacher" in err[2]
+    )
     assert not stage_dir("hand", "physicalized").exists()
 
 
@@ -147,10 +176,16 @@ def test_kill_9_mid_run_then_rerun_gives_the_same_dataset(tmp_path):
             proc.wait()
             assert len(list(cache.glob("*.pkl"))) == 1 and not (root / "hand" / "physicalized").exists()
         assert subprocess.run(cmd, env=env, capture_output=True).returncode == 0
-    data = {run: pd.concat([pd.read_parquet(p) for p in sorted((r / "hand" / "physicalized" / "data").rglob("*.parquet"))])
-            for run, r in roots.items()}  # fmt: skip
+    data = {
+        run: pd.concat([pd.read_parquet(p) for p in sorted((r / "hand" / "physicalized" / "data").rglob("*.parquet"))])
+        for run, r in roots.items()
+    }
     assert data["clean"]["episode_index"].nunique() == 2
     pd.testing.assert_frame_equal(data["killed"], data["clean"])
-    reports = {run: json.loads((r / "hand" / "physicalized" / "report.json").read_text())["clips"] for run, r in roots.items()}
+    reports = {
+        run: json.loads((r / "hand" / "physicalized" / "report.json").read_text())["clips"] for run, r in roots.items()
+    }
     timing = ("realtime_factor", "realtime_factor_per_core")
-    assert [{k: v for k, v in c.items() if k not in timing} for c in reports["killed"]] == [{k: v for k, v in c.items() if k not in timing} for c in reports["clean"]]
+    assert [{k: v for k, v in c.items() if k not in timing} for c in reports["killed"]] == [
+        {k: v for k, v in c.items() if k not in timing} for c in reports["clean"]
+    ]

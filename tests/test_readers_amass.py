@@ -22,8 +22,13 @@ def test_sample_without_model_says_what_to_pass():
 
 
 def _npz(tmp_path, name="clip.npz", T=4, **overrides):
-    d = dict(poses=np.zeros((T, 156)), trans=np.zeros((T, 3)), betas=np.zeros(16), gender=np.array("female"),
-             mocap_framerate=np.array(120.0))  # fmt: skip
+    d = dict(
+        poses=np.zeros((T, 156)),
+        trans=np.zeros((T, 3)),
+        betas=np.zeros(16),
+        gender=np.array("female"),
+        mocap_framerate=np.array(120.0),
+    )
     d.update(overrides)
     d = {k: v for k, v in d.items() if v is not None}
     p = tmp_path / name
@@ -45,17 +50,30 @@ def _npz(tmp_path, name="clip.npz", T=4, **overrides):
 )
 def test_bad_files(tmp_path, overrides, field, frame, match):
     p = _npz(tmp_path, **overrides)
-    expect_input_error(lambda: read_amass(p, body_model=tmp_path), tmp_path, file=p, field=field, frame=frame, match=match)
+    expect_input_error(
+        lambda: read_amass(p, body_model=tmp_path), tmp_path, file=p, field=field, frame=frame, match=match
+    )
 
 
 def test_model_path_errors(tmp_path):
     p = _npz(tmp_path)
     missing = tmp_path / "no_such_model"
-    expect_input_error(lambda: read_amass(p, body_model=missing), tmp_path, file=p, field="body_model", match=f"{missing} does not exist")
+    expect_input_error(
+        lambda: read_amass(p, body_model=missing),
+        tmp_path,
+        file=p,
+        field="body_model",
+        match=f"{missing} does not exist",
+    )
     empty = tmp_path / "models"
     empty.mkdir()
-    expect_input_error(lambda: read_amass(p, body_model=empty), tmp_path, file=p, field="body_model",
-                       match=r"no SMPL\+H female model in .*SMPLH_FEMALE\.pkl")  # fmt: skip
+    expect_input_error(
+        lambda: read_amass(p, body_model=empty),
+        tmp_path,
+        file=p,
+        field="body_model",
+        match=r"no SMPL\+H female model in .*SMPLH_FEMALE\.pkl",
+    )
     expect_input_error(lambda: read_amass(p), tmp_path, file=p, field="body_model", match="--body-model PATH")
 
 

@@ -53,8 +53,11 @@ ROW1 = "10 100 20 -15 90 5 0 30 90 0 45"
 def _axis(axis, deg):
     """Elementary rotation matrix, written out (independent of scipy's Euler conventions)."""
     c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
-    return {"X": np.array([[1, 0, 0], [0, c, -s], [0, s, c]]), "Y": np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]),
-            "Z": np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])}[axis]  # fmt: skip
+    return {
+        "X": np.array([[1, 0, 0], [0, c, -s], [0, s, c]]),
+        "Y": np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]),
+        "Z": np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]),
+    }[axis]
 
 
 def _expected(row):
@@ -71,7 +74,11 @@ def _expected(row):
 
 def test_forward_kinematics_matches_hand_computation(tmp_path):
     c = read_bvh(_bvh(tmp_path, [ROW0, ROW1]), units="cm", up="y")
-    assert c.skeleton.joint_names == ("Hips", "Arm", "Hand") and c.skeleton.parents == (-1, 0, 1)  # End Site is not a joint
+    assert c.skeleton.joint_names == ("Hips", "Arm", "Hand") and c.skeleton.parents == (
+        -1,
+        0,
+        1,
+    )  # End Site is not a joint
     A = _axis("X", 90)  # y-up -> z-up: y becomes z
     for t, row in enumerate([ROW0, ROW1]):
         pos, rots = _expected(row)
@@ -85,8 +92,10 @@ def test_channel_order_matters(tmp_path):
     row = "10 100 20 30 0 0 90 40 0 5 0"
     xyz = read_bvh(_bvh(tmp_path, [row], name="xyz.bvh"), units="cm", up="y")
     p = tmp_path / "zyx.bvh"
-    p.write_text(HEADER.replace("CHANNELS 3 Xrotation Yrotation Zrotation", "CHANNELS 3 Zrotation Yrotation Xrotation")
-                 + f"Frames: 1\nFrame Time: 0.0333333\n{row}\n")  # fmt: skip
+    p.write_text(
+        HEADER.replace("CHANNELS 3 Xrotation Yrotation Zrotation", "CHANNELS 3 Zrotation Yrotation Xrotation")
+        + f"Frames: 1\nFrame Time: 0.0333333\n{row}\n"
+    )
     zyx = read_bvh(p, units="cm", up="y")
     assert np.abs(xyz.joint_pos[0, 2] - zyx.joint_pos[0, 2]).max() > 0.05
     np.testing.assert_allclose(xyz.joint_pos[0, :2], zyx.joint_pos[0, :2])  # the arm's own origin does not move
@@ -155,7 +164,15 @@ def test_bad_bvh(tmp_path, rows, kw, field, frame, match):
 
 def test_bad_units_and_header(tmp_path):
     p = _bvh(tmp_path, [ROW0])
-    expect_input_error(lambda: read_bvh(p, units="furlong"), tmp_path, file=p, field="units", match="unknown units 'furlong'")
+    expect_input_error(
+        lambda: read_bvh(p, units="furlong"), tmp_path, file=p, field="units", match="unknown units 'furlong'"
+    )
     q = tmp_path / "bad_channel.bvh"
-    q.write_text(HEADER.replace("Zrotation Yrotation Xrotation", "Zrotation Yrotation Wrotation", 1) + "Frames: 1\nFrame Time: 0.1\n" + ROW0)
-    expect_input_error(lambda: read_bvh(q), tmp_path, file=q, field="HIERARCHY line 5", match="unknown channel 'Wrotation'")
+    q.write_text(
+        HEADER.replace("Zrotation Yrotation Xrotation", "Zrotation Yrotation Wrotation", 1)
+        + "Frames: 1\nFrame Time: 0.1\n"
+        + ROW0
+    )
+    expect_input_error(
+        lambda: read_bvh(q), tmp_path, file=q, field="HIERARCHY line 5", match="unknown channel 'Wrotation'"
+    )

@@ -43,8 +43,14 @@ def test_short_gaps_are_linear_and_long_gap_policies(tmp_path):
         dropped = read_c3d(REAL, long_gaps="drop")
     assert len(dropped.skeleton.joint_names) == 48 and not LONG_GAPS & set(dropped.skeleton.joint_names)
     assert len(read_c3d(REAL, max_gap=1.0).skeleton.joint_names) == 51  # every gap is short now
-    expect_input_error(lambda: read_c3d(REAL, long_gaps="error"), REAL.parent, file=REAL, field="marker Daphnee:STERl",
-                       frame=233, match=r"gap of 27 frames \(233-259\)")  # fmt: skip
+    expect_input_error(
+        lambda: read_c3d(REAL, long_gaps="error"),
+        REAL.parent,
+        file=REAL,
+        field="marker Daphnee:STERl",
+        frame=233,
+        match=r"gap of 27 frames \(233-259\)",
+    )
 
 
 def _write(path, points, labels=("a", "b"), units="mm", y_screen=None):

@@ -103,8 +103,12 @@ def test_shared_folders(tmp_path):
     (clip,) = read_clips(SHARED_MOCAP / "omomo")  # the mesh and height_dict.pkl beside it are skipped
     assert clip.frames == 196 and clip.objects[0].name == "largebox"
     assert [c.frames for c in read_clips(SHARED_MOCAP / "bvh")] == [10, 1064]  # lafan1_... sorts before pymo_...
-    e = expect_input_error(lambda: read_clips(SHARED_MOCAP / "amass"), SHARED_MOCAP / "amass",
-                           file=SHARED_MOCAP / "amass" / "amass_sample.npz", field="body_model")  # fmt: skip
+    e = expect_input_error(
+        lambda: read_clips(SHARED_MOCAP / "amass"),
+        SHARED_MOCAP / "amass",
+        file=SHARED_MOCAP / "amass" / "amass_sample.npz",
+        field="body_model",
+    )
     assert "--body-model" in str(e)
     with pytest.raises(Exception, match="no readable human clips"):
         read_clips(SHARED_MOCAP / "omniretarget")  # only a robot motion there

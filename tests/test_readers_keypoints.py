@@ -60,7 +60,9 @@ def test_csv_time_column_and_fps_argument(tmp_path):
     c = read_keypoints_csv(_csv(tmp_path, [HEADER] + _rows()))
     assert c.fps == pytest.approx(100.0) and c.skeleton.joint_names == tuple(NAMES)
     np.testing.assert_allclose(c.joint_pos, _frames(4), atol=1e-6)
-    no_time = [",".join(h for h in HEADER.split(",") if h != "time")] + [",".join(r.split(",")[:1] + r.split(",")[2:]) for r in _rows()]
+    no_time = [",".join(h for h in HEADER.split(",") if h != "time")] + [
+        ",".join(r.split(",")[:1] + r.split(",")[2:]) for r in _rows()
+    ]
     assert read_keypoints_csv(_csv(tmp_path, no_time, "n.csv"), fps=30).fps == 30
 
 
@@ -70,7 +72,9 @@ def test_bad_keypoint_files(tmp_path):
     expect_input_error(lambda: read_keypoints_npz(p), tmp_path, file=p, field="joint_names", match="missing")
     o = tmp_path / "objnames.npz"
     np.savez(o, joint_pos=_frames(), joint_names=np.array(NAMES, dtype=object), fps=30)
-    expect_input_error(lambda: read_keypoints_npz(o), tmp_path, file=o, field="joint_names", match="pickled object array")
+    expect_input_error(
+        lambda: read_keypoints_npz(o), tmp_path, file=o, field="joint_names", match="pickled object array"
+    )
     bad = _frames()
     bad[3, 2, 1] = np.nan
     q = tmp_path / "nan.npz"
@@ -79,7 +83,14 @@ def test_bad_keypoint_files(tmp_path):
     rows = _rows()
     rows[2] = rows[2].rsplit(",", 1)[0]
     r = _csv(tmp_path, [HEADER] + rows, "short.csv")
-    expect_input_error(lambda: read_keypoints_csv(r), tmp_path, file=r, field="row 4", frame=2, match="has 16 columns, the header has 17")
+    expect_input_error(
+        lambda: read_keypoints_csv(r),
+        tmp_path,
+        file=r,
+        field="row 4",
+        frame=2,
+        match="has 16 columns, the header has 17",
+    )
     rows = _rows()
     cells = rows[1].split(",")
     cells[5] = "nan"  # spine_x

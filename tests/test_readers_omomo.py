@@ -9,7 +9,7 @@ from mocap_paths import SHARED_MOCAP, expect_input_error, needs_shared
 from scipy.spatial import cKDTree
 
 from pipeline.readers.amass import SMPLH_JOINT_NAMES
-from pipeline.readers.omomo import CONCAVITY_GAP, COLUMNS, collision_kind, hull_gap_ratio, parse_name, read_omomo
+from pipeline.readers.omomo import COLUMNS, CONCAVITY_GAP, collision_kind, hull_gap_ratio, parse_name, read_omomo
 from pipeline.rotations import rotation_from_wxyz
 
 BOX = SHARED_MOCAP / "omomo" / "sub3_largebox_003.pt"
@@ -98,7 +98,10 @@ def test_intermimic_table():
     assert c.subject_height == pytest.approx(true, rel=0.02)  # no height_dict here: skeleton estimate
     d = _distances_to_mesh(c, ["left_middle3", "right_middle3"])
     touching = obj.contact
-    print(f"fingertips to table: {np.median(d[touching]) * 100:.1f} cm in contact frames, {np.median(d[~touching]) * 100:.1f} cm otherwise")
+    print(
+        f"fingertips to table: {np.median(d[touching]) * 100:.1f} cm in contact frames, "
+        f"{np.median(d[~touching]) * 100:.1f} cm otherwise"
+    )
     assert np.median(d[touching].min(axis=1)) < 0.06 and np.median(d[~touching].min(axis=1)) > 0.15
 
 
@@ -120,7 +123,9 @@ def test_parse_name_and_collision_rule():
 
     cube, cylinder = trimesh.creation.box([1, 1, 1]), trimesh.creation.cylinder(0.3, 1.0)
     slab = lambda size, at: trimesh.creation.box(size).apply_translation(at)  # noqa: E731
-    trough = trimesh.util.concatenate([slab([1, 1, 0.05], [0, 0, -0.475]), slab([0.05, 1, 1], [-0.475, 0, 0]), slab([0.05, 1, 1], [0.475, 0, 0])])
+    trough = trimesh.util.concatenate(
+        [slab([1, 1, 0.05], [0, 0, -0.475]), slab([0.05, 1, 1], [-0.475, 0, 0]), slab([0.05, 1, 1], [0.475, 0, 0])]
+    )
     assert collision_kind("thing", cube) == "hull" and collision_kind("thing", cylinder) == "hull"
     assert collision_kind("thing", trough) == "decomposition"
     assert collision_kind("smallbox", trough) == "hull" and collision_kind("woodchair", cube) == "decomposition"
@@ -156,10 +161,14 @@ def test_bad_tensors(tmp_path):
 
 def test_missing_and_empty_mesh(tmp_path):
     p = _save(tmp_path, _tensor())
-    expect_input_error(lambda: read_omomo(p), tmp_path, file=p, field="mesh", match=r"no mesh for object 'box'.*box\.obj")
+    expect_input_error(
+        lambda: read_omomo(p), tmp_path, file=p, field="mesh", match=r"no mesh for object 'box'.*box\.obj"
+    )
     (tmp_path / "box.obj").write_text("")
     expect_input_error(lambda: read_omomo(p), tmp_path, file=p, field="mesh", match=r"box\.obj")
-    expect_input_error(lambda: read_omomo(p, mesh=tmp_path / "nope.obj"), tmp_path, file=p, field="mesh", match="does not exist")
+    expect_input_error(
+        lambda: read_omomo(p, mesh=tmp_path / "nope.obj"), tmp_path, file=p, field="mesh", match="does not exist"
+    )
 
 
 @needs_shared

@@ -67,7 +67,13 @@ def test_reorder_by_name_and_object_scale(tmp_path, omni):
     d["joint_names"] = np.array([n if n != "waist_roll_joint" else "torso_joint" for n in d["joint_names"]])
     q = tmp_path / "renamed.npz"
     np.savez(q, **d)
-    expect_input_error(lambda: read_beyondmimic_npz(q), tmp_path, file=q, field="joint_names", match="missing G1 joints: waist_roll_joint")
+    expect_input_error(
+        lambda: read_beyondmimic_npz(q),
+        tmp_path,
+        file=q,
+        field="joint_names",
+        match="missing G1 joints: waist_roll_joint",
+    )
 
 
 def test_joints_only_npz_takes_root_from_bodies(tmp_path):
@@ -75,13 +81,22 @@ def test_joints_only_npz_takes_root_from_bodies(tmp_path):
     body_pos, body_quat = np.zeros((T, 2, 3)), np.tile([1.0, 0, 0, 0], (T, 2, 1))
     body_pos[:, 1] = [0.1, 0.2, 0.8]
     p = tmp_path / "bm.npz"
-    np.savez(p, fps=[50], joint_pos=np.zeros((T, 29)), joint_names=np.array(G1_JOINT_NAMES), body_pos_w=body_pos,
-             body_quat_w=body_quat, body_names=np.array(["world", "pelvis"]))  # fmt: skip
+    np.savez(
+        p,
+        fps=[50],
+        joint_pos=np.zeros((T, 29)),
+        joint_names=np.array(G1_JOINT_NAMES),
+        body_pos_w=body_pos,
+        body_quat_w=body_quat,
+        body_names=np.array(["world", "pelvis"]),
+    )
     r = read_beyondmimic_npz(p)
     np.testing.assert_allclose(r.qpos[:, :7], [[0.1, 0.2, 0.8, 1, 0, 0, 0]] * T)
     q = tmp_path / "nonames.npz"
     np.savez(q, fps=[50], joint_pos=np.zeros((T, 36)))
-    expect_input_error(lambda: read_beyondmimic_npz(q), tmp_path, file=q, field="joint_names", match="pass joint_names=")
+    expect_input_error(
+        lambda: read_beyondmimic_npz(q), tmp_path, file=q, field="joint_names", match="pass joint_names="
+    )
     s = tmp_path / "wide.npz"
     np.savez(s, fps=[50], joint_pos=np.zeros((T, 30)), joint_names=np.array(G1_JOINT_NAMES))
     expect_input_error(lambda: read_beyondmimic_npz(s), tmp_path, file=s, field="joint_pos", match=r"\(3, 30\)")
@@ -89,8 +104,14 @@ def test_joints_only_npz_takes_root_from_bodies(tmp_path):
 
 def _gmr(T=5, **over):
     root_rot = np.tile([0.0, 0.0, np.sin(0.3), np.cos(0.3)], (T, 1))  # xyzw, yaw 0.6 rad
-    d = dict(fps=30, root_pos=np.tile([0.0, 0.0, 0.79], (T, 1)), root_rot=root_rot, dof_pos=np.linspace(0, 1, T * 29).reshape(T, 29),
-             local_body_pos=None, link_body_list=["pelvis", "torso_link"])  # fmt: skip
+    d = dict(
+        fps=30,
+        root_pos=np.tile([0.0, 0.0, 0.79], (T, 1)),
+        root_rot=root_rot,
+        dof_pos=np.linspace(0, 1, T * 29).reshape(T, 29),
+        local_body_pos=None,
+        link_body_list=["pelvis", "torso_link"],
+    )
     d.update(over)
     return d
 
@@ -121,7 +142,9 @@ class _Evil:
 
 def test_bad_gmr_files(tmp_path):
     p = _pkl(tmp_path, _gmr(dof_pos=np.zeros((5, 23))), "narrow.pkl")
-    expect_input_error(lambda: read_gmr_pkl(p), tmp_path, file=p, field="dof_pos", match=r"shape \(5, 23\) does not match \(T, 29\)")
+    expect_input_error(
+        lambda: read_gmr_pkl(p), tmp_path, file=p, field="dof_pos", match=r"shape \(5, 23\) does not match \(T, 29\)"
+    )
     root = np.zeros((5, 3))
     root[4, 2] = np.inf
     q = _pkl(tmp_path, _gmr(root_pos=root), "inf.pkl")

@@ -41,10 +41,21 @@ def test_env_shapes_and_rsl_rl_contract(problem):
     scene, ref, objects, _ = problem
     env = ResidualEnv(scene, ref, objects, 3, 0, SMOKE)
     obs = env.get_observations()
-    assert tuple(obs.batch_size) == (3,) and obs["policy"].shape == (3, env.obs_dim) and obs["policy"].dtype == torch.float32
-    assert env.obs_dim == 94 + (1 + len(SMOKE.lookahead)) * 38 + 10 + 3  # state, look-ahead, object slot, phase + stance
+    assert (
+        tuple(obs.batch_size) == (3,)
+        and obs["policy"].shape == (3, env.obs_dim)
+        and obs["policy"].dtype == torch.float32
+    )
+    assert (
+        env.obs_dim == 94 + (1 + len(SMOKE.lookahead)) * 38 + 10 + 3
+    )  # state, look-ahead, object slot, phase + stance
     o, r, done, extras = env.step(torch.zeros(3, 29))
-    assert o["policy"].shape == (3, env.obs_dim) and r.shape == (3,) and done.shape == (3,) and extras["time_outs"].shape == (3,)
+    assert (
+        o["policy"].shape == (3, env.obs_dim)
+        and r.shape == (3,)
+        and done.shape == (3,)
+        and extras["time_outs"].shape == (3,)
+    )
     assert r.dtype == torch.float32 and done.dtype == torch.bool
     assert torch.all(r > SMOKE.w_alive) and not done.any()  # standing on the reference: every kernel near 1, no fall
     assert torch.equal(env.episode_length_buf, torch.ones(3, dtype=torch.long))
@@ -60,8 +71,18 @@ def test_env_is_deterministic_for_a_seed_and_the_residual_moves_the_targets(prob
         for _ in range(5):
             o, r, _, _ = env.step(torch.randn(2, 29, generator=gen))
         runs.append((env.start.copy(), first, o["policy"].clone(), r.clone(), env.datas[0].qpos.copy()))
-    (s0, f0, o0, r0, q0), (s1, f1, o1, r1, q1), (s2, *_), = runs
-    assert np.array_equal(s0, s1) and torch.equal(f0, f1) and torch.equal(o0, o1) and torch.equal(r0, r1) and np.array_equal(q0, q1)
+    (
+        (s0, f0, o0, r0, q0),
+        (s1, f1, o1, r1, q1),
+        (s2, *_),
+    ) = runs
+    assert (
+        np.array_equal(s0, s1)
+        and torch.equal(f0, f1)
+        and torch.equal(o0, o1)
+        and torch.equal(r0, r1)
+        and np.array_equal(q0, q1)
+    )
     assert not np.array_equal(s0, s2)  # another seed, other start frames
     # the applied targets are the controller's plus scale * clip(a): a unit residual on one joint moves it
     env = ResidualEnv(scene, ref, objects, 1, 0, SMOKE)
@@ -98,7 +119,9 @@ def test_smoke_training_writes_a_checkpoint_that_runs_in_simulate(checkpoint, pr
 
 
 def test_training_is_deterministic_for_a_seed(checkpoint, tmp_path):
-    again = torch.load(train_residual(_standing_clip(), 2, 4, 0, tmp_path / "again.pt", config=SMOKE), weights_only=True)
+    again = torch.load(
+        train_residual(_standing_clip(), 2, 4, 0, tmp_path / "again.pt", config=SMOKE), weights_only=True
+    )
     first = torch.load(checkpoint, weights_only=True)
     assert first["actor_state_dict"].keys() == again["actor_state_dict"].keys()
     assert all(torch.equal(v, again["actor_state_dict"][k]) for k, v in first["actor_state_dict"].items())
@@ -147,7 +170,11 @@ def test_stage_with_the_residual_teacher(tmp_path, monkeypatch, checkpoint, caps
     junk.write_bytes(b"not a checkpoint")
     assert main(["physicalize", "--name", "stand", "--teacher", f"base+residual:{junk}"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 2 and "trained for actuator profile 'mjlab'" in err[0] and "unreadable residual checkpoint" in err[1]
+    assert (
+        len(err) == 2
+        and "trained for actuator profile 'mjlab'" in err[0]
+        and "unreadable residual checkpoint" in err[1]
+    )
     assert not stage_dir("stand", "physicalized").exists()
     assert main(["physicalize", "--name", "stand", "--teacher", teacher]) == 0
     root = stage_dir("stand", "physicalized")
@@ -172,6 +199,40 @@ def test_train_on_a_retargeted_episode_from_the_cli(tmp_path, monkeypatch):
     features, episodes = robot_clips_to_episodes([_standing_clip(30)])
     write_dataset(stage_dir("stand", "retargeted"), "lessmimic/stand-retargeted", 50, features, episodes)
     out = tmp_path / "r.pt"
-    assert main(["physicalize-residual", "--name", "stand", "--episode", "3", "--iterations", "1", "--envs", "2", "--out", str(out)]) == 2
-    assert main(["physicalize-residual", "--name", "stand", "--episode", "0", "--iterations", "1", "--envs", "2", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "physicalize-residual",
+                "--name",
+                "stand",
+                "--episode",
+                "3",
+                "--iterations",
+                "1",
+                "--envs",
+                "2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
+    assert (
+        main(
+            [
+                "physicalize-residual",
+                "--name",
+                "stand",
+                "--episode",
+                "0",
+                "--iterations",
+                "1",
+                "--envs",
+                "2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert ResidualPolicy.load(out).training["source"] == "hand-made:stand"

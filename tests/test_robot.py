@@ -5,8 +5,15 @@ import numpy as np
 import pytest
 
 from pipeline.robot import (
-    ACTUATOR_PROFILES, G1_JOINT_NAMES, LESSMIMIC_DEMO_DF_BODIES, G1_LINK_NAMES, actuator_profile, g1_model, g1_xml_path, joint_limits,
-)  # fmt: skip
+    ACTUATOR_PROFILES,
+    G1_JOINT_NAMES,
+    G1_LINK_NAMES,
+    LESSMIMIC_DEMO_DF_BODIES,
+    actuator_profile,
+    g1_model,
+    g1_xml_path,
+    joint_limits,
+)
 
 
 def test_joint_order_is_the_mjlab_xml_order():
@@ -18,12 +25,33 @@ def test_joint_order_is_the_mjlab_xml_order():
 def test_physics_model_without_visual_meshes_has_the_xml_physics():
     full, lean = mujoco.MjModel.from_xml_path(str(g1_xml_path())), g1_model()
     assert lean.nmesh == 0 and full.nmesh > 0
-    for field in ("body_mass", "body_inertia", "body_ipos", "body_iquat", "body_pos", "body_quat", "jnt_range", "dof_armature", "dof_damping"):
+    for field in (
+        "body_mass",
+        "body_inertia",
+        "body_ipos",
+        "body_iquat",
+        "body_pos",
+        "body_quat",
+        "jnt_range",
+        "dof_armature",
+        "dof_damping",
+    ):
         np.testing.assert_array_equal(getattr(lean, field), getattr(full, field), err_msg=field)
 
     def collision(m):
-        return [(m.geom(g).name, m.geom_bodyid[g], m.geom_type[g], *m.geom_size[g], *m.geom_pos[g], *m.geom_quat[g], *m.geom_friction[g])
-                for g in range(m.ngeom) if m.geom_contype[g] or m.geom_conaffinity[g]]  # fmt: skip
+        return [
+            (
+                m.geom(g).name,
+                m.geom_bodyid[g],
+                m.geom_type[g],
+                *m.geom_size[g],
+                *m.geom_pos[g],
+                *m.geom_quat[g],
+                *m.geom_friction[g],
+            )
+            for g in range(m.ngeom)
+            if m.geom_contype[g] or m.geom_conaffinity[g]
+        ]
 
     assert collision(lean) == collision(full) and len(collision(lean)) > 20
     # the same contacts and dynamics at a crouched, tilted pose

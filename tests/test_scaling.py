@@ -9,9 +9,10 @@ import dataclasses
 import mujoco
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
-
 from mocap_paths import needs_shared
+from scipy.spatial.transform import Rotation
+from test_mapping import CLIPS, clip_named
+
 from pipeline.clip import HumanClip, ObjectTrack
 from pipeline.default_input import default_clips, default_demos
 from pipeline.errors import InputError
@@ -22,7 +23,6 @@ from retarget.frames import standing_frame
 from retarget.mapping import g1_rest, load_mapping
 from retarget.objects import map_objects, object_bottom
 from retarget.scaling import compute_scale, human_to_targets
-from test_mapping import CLIPS, clip_named
 
 SYNTH = {c.task: c for c in default_clips()}
 
@@ -58,12 +58,20 @@ def test_scale_factors_on_the_synthetic_skeleton():
     assert info.arm == pytest.approx(info.robot["arm"] / (UPPER_ARM + FOREARM))
     assert (info.subject_height, info.height_source) == (1.70, "clip")
     s = info.summary()
-    assert s["scale_leg"] == info.leg and s["reference"] == "rest pose" and s["height_ratio"] == pytest.approx(g1_rest().height / 1.70)
+    assert (
+        s["scale_leg"] == info.leg
+        and s["reference"] == "rest pose"
+        and s["height_ratio"] == pytest.approx(g1_rest().height / 1.70)
+    )
 
 
 #: (leg, trunk, arm) factors measured on each clip (see the module doc of retarget.scaling).
-FACTORS = {"synthetic": (0.863, 0.621, 0.647), "omomo": (0.760, 0.665, 0.629), "pymo": (0.803, 0.592, 0.756),
-           "lafan1": (0.767, 0.557, 0.634)}  # fmt: skip
+FACTORS = {
+    "synthetic": (0.863, 0.621, 0.647),
+    "omomo": (0.760, 0.665, 0.629),
+    "pymo": (0.803, 0.592, 0.756),
+    "lafan1": (0.767, 0.557, 0.634),
+}
 
 
 @pytest.mark.parametrize("name", CLIPS)
@@ -193,7 +201,10 @@ def test_omomo_box_follows_the_scaled_interaction():
     human_hands = clip.joint_pos[:, [names.index("left_wrist"), names.index("right_wrist")]].mean(axis=1)
     gap = (o.pose[lifted, :2] - hands[lifted, :2]) - (h.pose[lifted, :2] - human_hands[lifted, :2])
     assert np.median(np.linalg.norm(gap, axis=1)) < 0.02
-    travel, human_travel = np.linalg.norm(o.pose[-1, :2] - o.pose[0, :2]), np.linalg.norm(h.pose[-1, :2] - h.pose[0, :2])
+    travel, human_travel = (
+        np.linalg.norm(o.pose[-1, :2] - o.pose[0, :2]),
+        np.linalg.norm(h.pose[-1, :2] - h.pose[0, :2]),
+    )
     assert travel == pytest.approx(compute_scale(clip, load_mapping(clip.skeleton)).leg * human_travel, rel=0.15)
 
 
@@ -205,7 +216,9 @@ def test_height_out_of_range_needs_an_override():
     m = load_mapping(clip.skeleton)
     with pytest.raises(InputError) as info:
         human_to_targets(clip, m)
-    assert info.value.field == "subject_height" and "2.500 m" in str(info.value) and "height_override" in str(info.value)
+    assert (
+        info.value.field == "subject_height" and "2.500 m" in str(info.value) and "height_override" in str(info.value)
+    )
     tg = human_to_targets(clip, m, height_override=2.5)
     assert compute_scale(clip, m, height_override=2.5).height_source == "override" and tg.frames == clip.frames
     short = dataclasses.replace(SYNTH["PickUp"], subject_height=0.8)
@@ -220,7 +233,9 @@ def test_height_out_of_range_needs_an_override():
 
 def test_clip_shorter_than_two_frames():
     clip = SYNTH["PickUp"]
-    one = HumanClip(clip.skeleton, clip.joint_pos[:1], clip.fps, "one.bvh", subject_height=1.7, joint_quat=clip.joint_quat[:1])
+    one = HumanClip(
+        clip.skeleton, clip.joint_pos[:1], clip.fps, "one.bvh", subject_height=1.7, joint_quat=clip.joint_quat[:1]
+    )
     with pytest.raises(InputError) as info:
         human_to_targets(one, load_mapping(one.skeleton))
     assert str(info.value).startswith("one.bvh: joint_pos: ") and "at least 2" in str(info.value)

@@ -6,12 +6,12 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from mocap_paths import SHARED_MOCAP, needs_shared
 
 from pipeline.errors import InputError
 from pipeline.geometry import Chair, MeshGeometry, ObjectPhysics, Primitive
 from pipeline.robot import G1_JOINT_NAMES, actuator_profile
 from pipeline.scene import Scene, SceneObject, build_scene, restitution_damping_ratio
-from mocap_paths import SHARED_MOCAP, needs_shared
 
 
 def _settle(scene: Scene, seconds: float = 1.0) -> mujoco.MjData:
@@ -95,7 +95,9 @@ def test_restitution_bounce_height():
     """A ball dropped from 0.5 m rebounds to about e^2 * 0.5 m."""
     heights = {}
     for e in (0.0, 0.6, 0.8):
-        obj = SceneObject("ball", Primitive("sphere", (0.05,)), ObjectPhysics(mass=0.5, restitution=e), pose=(0, 0, 0.55, 1, 0, 0, 0))
+        obj = SceneObject(
+            "ball", Primitive("sphere", (0.05,)), ObjectPhysics(mass=0.5, restitution=e), pose=(0, 0, 0.55, 1, 0, 0, 0)
+        )
         s = build_scene([obj])
         d = mujoco.MjData(s.model)
         d.qpos[:3] = (-5, 0, 0.8)
@@ -143,7 +145,9 @@ def test_omomo_box_mesh_collides_through_its_hull():
     path = SHARED_MOCAP / "omomo" / "largebox.obj"
     mesh = trimesh.load(path, force="mesh")
     assert not mesh.is_watertight
-    obj = SceneObject("box", MeshGeometry(str(path)), ObjectPhysics(mass=4.0), pose=(0, 0, -mesh.bounds[0, 2] + 0.02, 1, 0, 0, 0))
+    obj = SceneObject(
+        "box", MeshGeometry(str(path)), ObjectPhysics(mass=4.0), pose=(0, 0, -mesh.bounds[0, 2] + 0.02, 1, 0, 0, 0)
+    )
     s = build_scene([obj])
     d = _settle(s)
     a = s.object_qpos_adr["box"]
@@ -157,7 +161,11 @@ def test_link_contact_surfaces():
 
     m = build_scene().model
     names = lambda body: sorted(m.geom(g).name for g in link_collision_geoms(m, body))  # noqa: E731
-    assert names("pelvis") == ["left_hip_collision", "pelvis_collision", "right_hip_collision"]  # the G1 sits on its hips
+    assert names("pelvis") == [
+        "left_hip_collision",
+        "pelvis_collision",
+        "right_hip_collision",
+    ]  # the G1 sits on its hips
     assert names("left_hip_pitch_link") == ["left_hip_collision"]  # no geoms of its own: the child's capsule
     assert len(names("left_ankle_roll_link")) == 7
     with pytest.raises(ValueError, match="'nose' is not a body"):

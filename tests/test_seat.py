@@ -22,17 +22,23 @@ LINKS = ("pelvis", "left_wrist_yaw_link")
 
 def _post_scene(gap: float):
     """The standing robot and a fixed post whose top is ``gap`` below the pelvis' collision geom; its qpos."""
-    probe = build_scene([SceneObject("post", Primitive("box", (*HALF, 0.05)), pose=(0, 0, 0.05, 1, 0, 0, 0), fixed=True)])
+    probe = build_scene(
+        [SceneObject("post", Primitive("box", (*HALF, 0.05)), pose=(0, 0, 0.05, 1, 0, 0, 0), fixed=True)]
+    )
     q0 = place_on_floor(probe.model, default_qpos(probe.profile)[None])[0]
     m, d = probe.model, mujoco.MjData(probe.model)
     d.qpos[:36] = q0
     mujoco.mj_forward(m, d)
     pelvis = [g for g in range(m.ngeom) if m.geom_bodyid[g] == m.body("pelvis").id and m.geom_contype[g]]
     post = m.geom("post_col0").id
-    above = min(mujoco.mj_geomDistance(m, d, g, post, 2.0, None) for g in pelvis)  # pelvis bottom above the 0.1 m high post
+    above = min(
+        mujoco.mj_geomDistance(m, d, g, post, 2.0, None) for g in pelvis
+    )  # pelvis bottom above the 0.1 m high post
     top = 0.1 + above - gap
     x = float(d.xpos[m.body("pelvis").id][0])
-    scene = build_scene([SceneObject("post", Primitive("box", (*HALF, top / 2)), pose=(x, 0, top / 2, 1, 0, 0, 0), fixed=True)])
+    scene = build_scene(
+        [SceneObject("post", Primitive("box", (*HALF, top / 2)), pose=(x, 0, top / 2, 1, 0, 0, 0), fixed=True)]
+    )
     return scene, q0
 
 
@@ -56,9 +62,13 @@ def test_seat_points_on_the_labelled_frames_widened(near):
     on = np.isfinite(pts[:, :, 0])
     assert on[30:70, SEAT_LINKS.index("pelvis")].all() and not on[:30].any() and not on[70:].any()
     assert not np.delete(on, SEAT_LINKS.index("pelvis"), axis=1).any()
-    assert 0.3 < pts[50, 0, 2] < q0[2] and np.hypot(*(pts[50, 0, :2] - q0[:2])) < 0.1  # under the pelvis, well above the floor
+    assert (
+        0.3 < pts[50, 0, 2] < q0[2] and np.hypot(*(pts[50, 0, :2] - q0[:2])) < 0.1
+    )  # under the pelvis, well above the floor
     assert seat_support(scene.model, ref, LINKS, _labels(0, 0), None) is None  # never labelled
-    assert seat_support(scene.model, ref, ("left_wrist_yaw_link",), _labels(40, 60)[:, 1:], None) is None  # no pelvis label column
+    assert (
+        seat_support(scene.model, ref, ("left_wrist_yaw_link",), _labels(40, 60)[:, 1:], None) is None
+    )  # no pelvis label column
 
 
 def test_no_seat_point_out_of_reach():

@@ -22,7 +22,9 @@ def test_files_fingerprint_changes_when_an_input_file_changes(tmp_path):
     first = files_fingerprint([folder])
     assert files_fingerprint([folder]) == first and files_fingerprint([str(folder)]) == first
     st = (folder / "sub" / "b.bvh").stat()
-    os.utime(folder / "sub" / "b.bvh", ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000))  # touched: same bytes, new mtime
+    os.utime(
+        folder / "sub" / "b.bvh", ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000)
+    )  # touched: same bytes, new mtime
     touched = files_fingerprint([folder])
     assert touched != first
     (folder / "c.bvh").write_text("three")  # a file added
@@ -45,8 +47,8 @@ def test_by_content_ignores_mtime_and_folder_but_not_bytes(tmp_path):
 def test_dataset_fingerprint_stable_across_reads_new_on_rewrite(tmp_path):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    from pipeline.robot import default_qpos, actuator_profile
     from pipeline.clip import RobotClip
+    from pipeline.robot import actuator_profile, default_qpos
 
     qpos = default_qpos(actuator_profile("mjlab"))[None].repeat(10, 0)
     features, episodes = robot_clips_to_episodes([RobotClip(qpos, 50, "hand-made:stand", task="stand")])

@@ -46,6 +46,10 @@ def test_figures_name_the_joint_and_time_of_the_heaviest_load():
     heavy = static_torque_figures(qpos, (np.zeros((2, 3)), force), prof.effort_limit, 50.0)
     assert heavy["reference_static_torque_ratio_max"] > 2.0 * light["reference_static_torque_ratio_max"]
     assert heavy["reference_static_torque_at_s"] == pytest.approx(2 / 50.0)
-    i = UPPER_BODY_JOINTS.index(heavy["reference_static_torque_joint"])  # the named joint at the named frame carries the reported ratio
+    i = UPPER_BODY_JOINTS.index(
+        heavy["reference_static_torque_joint"]
+    )  # the named joint at the named frame carries the reported ratio
     tau = static_torques(qpos, (np.zeros((2, 3)), force))[2, i]
-    assert abs(tau) / prof.effort_limit[G1_JOINT_NAMES.index(UPPER_BODY_JOINTS[i])] == pytest.approx(heavy["reference_static_torque_ratio_max"])
+    assert abs(tau) / prof.effort_limit[G1_JOINT_NAMES.index(UPPER_BODY_JOINTS[i])] == pytest.approx(
+        heavy["reference_static_torque_ratio_max"]
+    )

@@ -60,7 +60,9 @@ def test_object_lost_is_reported():
     from pipeline.geometry import ObjectPhysics, Primitive
     from pipeline.scene import SceneObject
 
-    scene = build_scene([SceneObject("box", Primitive("box", (0.1, 0.1, 0.1)), ObjectPhysics(mass=1.0), pose=(1.0, 0, 0.1, 1, 0, 0, 0))])
+    scene = build_scene(
+        [SceneObject("box", Primitive("box", (0.1, 0.1, 0.1)), ObjectPhysics(mass=1.0), pose=(1.0, 0, 0.1, 1, 0, 0, 0))]
+    )
     qpos = place_on_floor(scene.model, np.repeat(default_qpos(scene.profile)[None], 40, 0))
     ref = build_reference(scene.model, qpos, 50)
     box = np.tile([1.0, 0.0, 0.1, 1.0, 0, 0, 0], (40, 1))
@@ -83,9 +85,11 @@ def test_foot_slide_counts_loaded_frames_only():
 
 
 def test_summary_counts_gain_sets_and_averages_figures():
-    clips = [{"episode": 0, "valid": True, "mpjpe_m": 0.02, "teacher_gains": 0},
-             {"episode": 1, "valid": True, "mpjpe_m": 0.04, "teacher_gains": 1},
-             {"episode": 2, "valid": False, "mpjpe_m": 0.06, "teacher_gains": 0}]  # fmt: skip
+    clips = [
+        {"episode": 0, "valid": True, "mpjpe_m": 0.02, "teacher_gains": 0},
+        {"episode": 1, "valid": True, "mpjpe_m": 0.04, "teacher_gains": 1},
+        {"episode": 2, "valid": False, "mpjpe_m": 0.06, "teacher_gains": 0},
+    ]
     s = summarise(clips)
     assert s["clips"] == 3 and s["valid_frac"] == 2 / 3 and abs(s["mpjpe_m"] - 0.04) < 1e-12
     assert s["clips_per_teacher_gains"] == {"0": 2, "1": 1}

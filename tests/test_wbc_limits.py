@@ -12,8 +12,8 @@ from physicalize.validate import LIMIT_TOL
 from physicalize.wbc import WholeBodyController
 from physicalize.wbc_config import WBCConfig
 from physicalize.wbc_rows import limit_bounds
-from pipeline.robot import G1_JOINT_NAMES, default_qpos
 from pipeline.geometry import Primitive
+from pipeline.robot import G1_JOINT_NAMES, default_qpos
 from pipeline.scene import SceneObject, build_scene
 
 
@@ -78,7 +78,9 @@ def test_squat_with_references_beyond_the_range_stays_inside_it(scene):
     roll = _track(scene, qpos, WBCConfig())
     assert roll.fell_at is None and roll.qp_failures == 0
     excess = _max_excess(scene, roll.qpos)
-    assert excess.max() <= LIMIT_TOL, {G1_JOINT_NAMES[j]: round(float(excess[j]), 3) for j in np.flatnonzero(excess > LIMIT_TOL)}
+    assert excess.max() <= LIMIT_TOL, {
+        G1_JOINT_NAMES[j]: round(float(excess[j]), 3) for j in np.flatnonzero(excess > LIMIT_TOL)
+    }
     assert np.abs(roll.qpos[:, 2] - qpos[:, 2]).max() < 0.05  # still squats
     # without the range rows the same reference drives joints past their range
     free = _max_excess(scene, _track(scene, qpos, WBCConfig(joint_limits=False)).qpos)
@@ -103,7 +105,9 @@ def _nearest_knee(scene, qpos: np.ndarray) -> float:
 
 def _block_scene(x: float):
     half = (0.1, 0.3, 0.3)  # its top above the knees: they meet its front face
-    return build_scene([SceneObject("block", Primitive("box", half), pose=(x + half[0], 0.0, half[2], 1.0, 0.0, 0.0, 0.0), fixed=True)])
+    return build_scene(
+        [SceneObject("block", Primitive("box", half), pose=(x + half[0], 0.0, half[2], 1.0, 0.0, 0.0, 0.0), fixed=True)]
+    )
 
 
 def test_knees_stay_off_an_object_the_reference_squats_into():

@@ -57,8 +57,9 @@ def npz_kind(path: str | Path) -> str | None:
     return None
 
 
-def read_clip(path: str | Path, *, body_model: str | Path | None = None, fps: float | None = None,
-              mesh: str | Path | None = None) -> HumanClip:  # fmt: skip
+def read_clip(
+    path: str | Path, *, body_model: str | Path | None = None, fps: float | None = None, mesh: str | Path | None = None
+) -> HumanClip:
     """One human clip file, dispatched by suffix (see the module doc)."""
     path = Path(path)
     suffix = path.suffix.lower()
@@ -84,7 +85,9 @@ def read_clip(path: str | Path, *, body_model: str | Path | None = None, fps: fl
         return read_keypoints_csv(path, fps=fps)
     if suffix == ".npz":
         return _read_npz(path, body_model, fps)
-    raise InputError(path, "suffix", f"unknown clip format {path.suffix or '(none)'!r}; expected one of {', '.join(HUMAN_SUFFIXES)}")
+    raise InputError(
+        path, "suffix", f"unknown clip format {path.suffix or '(none)'!r}; expected one of {', '.join(HUMAN_SUFFIXES)}"
+    )
 
 
 def _read_npz(path: Path, body_model, fps) -> HumanClip:
@@ -98,7 +101,11 @@ def _read_npz(path: Path, body_model, fps) -> HumanClip:
 
         return read_keypoints_npz(path, fps=fps)
     if kind == "robot":
-        raise _NotHuman(path, "joint_pos", "is a G1 robot motion (BeyondMimic/mjlab npz), not a human clip: read it with read_robot_clip / --robot")
+        raise _NotHuman(
+            path,
+            "joint_pos",
+            "is a G1 robot motion (BeyondMimic/mjlab npz), not a human clip: read it with read_robot_clip / --robot",
+        )
     raise _NotHuman(path, "keys", "none of 'poses' (AMASS), 'joint_pos'/'positions' (keypoints or robot motion)")
 
 
@@ -106,11 +113,14 @@ def _candidates(folder: Path) -> list[Path]:
     files = [p for p in folder.iterdir() if p.is_file()]
     for sub in (p for p in folder.iterdir() if p.is_dir() and not p.name.startswith(".")):
         files += [p for p in sub.iterdir() if p.is_file()]
-    return sorted((p for p in files if p.suffix.lower() in HUMAN_SUFFIXES), key=lambda p: p.relative_to(folder).as_posix())
+    return sorted(
+        (p for p in files if p.suffix.lower() in HUMAN_SUFFIXES), key=lambda p: p.relative_to(folder).as_posix()
+    )
 
 
-def read_clips(path: str | Path, *, body_model: str | Path | None = None, fps: float | None = None,
-               mesh: str | Path | None = None) -> list[HumanClip]:  # fmt: skip
+def read_clips(
+    path: str | Path, *, body_model: str | Path | None = None, fps: float | None = None, mesh: str | Path | None = None
+) -> list[HumanClip]:
     """Every human clip in ``path`` (a file, or a folder searched one level deep)."""
     path = Path(path)
     if not path.exists():
@@ -128,12 +138,20 @@ def read_clips(path: str | Path, *, body_model: str | Path | None = None, fps: f
                 continue
             raise
     if not clips:
-        raise InputError(path, "input", f"no readable human clips ({', '.join(HUMAN_SUFFIXES)}) in this folder or its sub-folders")
+        raise InputError(
+            path, "input", f"no readable human clips ({', '.join(HUMAN_SUFFIXES)}) in this folder or its sub-folders"
+        )
     return clips
 
 
-def read_robot_clip(path: str | Path, *, object_geometry: ObjectGeometry | None = None, object_scale: float = 1.0,
-                    object_name: str | None = None, joint_names: list[str] | None = None) -> RobotClip:  # fmt: skip
+def read_robot_clip(
+    path: str | Path,
+    *,
+    object_geometry: ObjectGeometry | None = None,
+    object_scale: float = 1.0,
+    object_name: str | None = None,
+    joint_names: list[str] | None = None,
+) -> RobotClip:
     """A peer's G1 motion: BeyondMimic/mjlab ``.npz`` or GMR ``.pkl`` (see :mod:`pipeline.readers.peers`)."""
     from pipeline.readers.peers import read_beyondmimic_npz, read_gmr_pkl
 
@@ -146,6 +164,11 @@ def read_robot_clip(path: str | Path, *, object_geometry: ObjectGeometry | None 
     if suffix == ".npz":
         if npz_kind(path) != "robot":
             raise InputError(path, "joint_pos", "is not a G1 motion npz (expected joint_pos [T, 36] or [T, 29])")
-        return read_beyondmimic_npz(path, object_geometry=object_geometry, object_scale=object_scale,
-                                    object_name=object_name, joint_names=joint_names)  # fmt: skip
+        return read_beyondmimic_npz(
+            path,
+            object_geometry=object_geometry,
+            object_scale=object_scale,
+            object_name=object_name,
+            joint_names=joint_names,
+        )
     raise InputError(path, "suffix", f"unknown robot motion format {path.suffix or '(none)'!r}; expected .npz or .pkl")

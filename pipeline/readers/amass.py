@@ -31,16 +31,62 @@ from pipeline.rotations import wxyz_from_rotation
 
 SMPLH_FINGERS = tuple(f"{f}{k}" for f in ("index", "middle", "pinky", "ring", "thumb") for k in (1, 2, 3))
 SMPLH_JOINT_NAMES: tuple[str, ...] = (
-    "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2", "left_ankle",
-    "right_ankle", "spine3", "left_foot", "right_foot", "neck", "left_collar", "right_collar", "head",
-    "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist",
-) + tuple(f"left_{f}" for f in SMPLH_FINGERS) + tuple(f"right_{f}" for f in SMPLH_FINGERS)  # fmt: skip
+    (
+        "pelvis",
+        "left_hip",
+        "right_hip",
+        "spine1",
+        "left_knee",
+        "right_knee",
+        "spine2",
+        "left_ankle",
+        "right_ankle",
+        "spine3",
+        "left_foot",
+        "right_foot",
+        "neck",
+        "left_collar",
+        "right_collar",
+        "head",
+        "left_shoulder",
+        "right_shoulder",
+        "left_elbow",
+        "right_elbow",
+        "left_wrist",
+        "right_wrist",
+    )
+    + tuple(f"left_{f}" for f in SMPLH_FINGERS)
+    + tuple(f"right_{f}" for f in SMPLH_FINGERS)
+)
 _FINGER_PARENTS = tuple(p for _ in range(5) for p in (-1, 0, 1))  # wrist, then within a finger
 SMPLH_PARENTS: tuple[int, ...] = (
-    -1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19,
-) + tuple(20 if p < 0 else 22 + 3 * (k // 3) + p for k, p in enumerate(_FINGER_PARENTS)) + tuple(
-    21 if p < 0 else 37 + 3 * (k // 3) + p for k, p in enumerate(_FINGER_PARENTS)
-)  # fmt: skip
+    (
+        -1,
+        0,
+        0,
+        0,
+        1,
+        2,
+        3,
+        4,
+        5,
+        6,
+        7,
+        8,
+        9,
+        9,
+        9,
+        12,
+        13,
+        14,
+        16,
+        17,
+        18,
+        19,
+    )
+    + tuple(20 if p < 0 else 22 + 3 * (k // 3) + p for k, p in enumerate(_FINGER_PARENTS))
+    + tuple(21 if p < 0 else 37 + 3 * (k // 3) + p for k, p in enumerate(_FINGER_PARENTS))
+)
 SMPLH_SKELETON = Skeleton(SMPLH_JOINT_NAMES, SMPLH_PARENTS)
 
 _POSE_DIMS = {156: "smplh", 165: "smplx"}
@@ -97,13 +143,23 @@ def _model_file(body_model: str | Path, kind: str, gender: str, src: str) -> Pat
     if p.is_file():
         return p
     if not p.is_dir():
-        raise InputError(src, "body_model", f"{p} does not exist; pass --body-model PATH to the SMPL+H/SMPL-X model file or folder")
+        raise InputError(
+            src, "body_model", f"{p} does not exist; pass --body-model PATH to the SMPL+H/SMPL-X model file or folder"
+        )
     stem = f"{kind.upper()}_{gender.upper()}"
-    for cand in (p / f"{stem}.pkl", p / f"{stem}.npz", p / kind / f"{stem}.pkl", p / kind / f"{stem}.npz",
-                 p / gender / "model.npz", p / kind / gender / "model.npz"):  # fmt: skip
+    for cand in (
+        p / f"{stem}.pkl",
+        p / f"{stem}.npz",
+        p / kind / f"{stem}.pkl",
+        p / kind / f"{stem}.npz",
+        p / gender / "model.npz",
+        p / kind / gender / "model.npz",
+    ):
         if cand.is_file():
             return cand
-    raise InputError(src, "body_model", f"no {_DISPLAY[kind]} {gender} model in {p} (looked for {stem}.pkl/.npz, {gender}/model.npz)")
+    raise InputError(
+        src, "body_model", f"no {_DISPLAY[kind]} {gender} model in {p} (looked for {stem}.pkl/.npz, {gender}/model.npz)"
+    )
 
 
 def global_orientations(poses: np.ndarray) -> np.ndarray:
@@ -125,10 +181,19 @@ def _run_model(model_path: Path, kind: str, gender: str, poses, trans, betas, sr
 
     cls = smplx.SMPLH if kind == "smplh" else smplx.SMPLX
     try:
-        model = cls(model_path=str(model_path), ext=model_path.suffix.lstrip("."), gender=gender, use_pca=False,
-                    flat_hand_mean=True, num_betas=len(betas), batch_size=1)  # fmt: skip
+        model = cls(
+            model_path=str(model_path),
+            ext=model_path.suffix.lstrip("."),
+            gender=gender,
+            use_pca=False,
+            flat_hand_mean=True,
+            num_betas=len(betas),
+            batch_size=1,
+        )
     except Exception as e:  # smplx raises AssertionError / KeyError / pickle errors on a wrong file
-        raise InputError(src, "body_model", f"{model_path} is not a usable {_DISPLAY[kind]} model ({type(e).__name__}: {e})") from None
+        raise InputError(
+            src, "body_model", f"{model_path} is not a usable {_DISPLAY[kind]} model ({type(e).__name__}: {e})"
+        ) from None
     idx = [JOINT_NAMES.index(n) for n in SMPLH_JOINT_NAMES]
     hands = (66, 111, 156) if kind == "smplh" else (75, 120, 165)
     f32 = lambda a: torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float32)  # noqa: E731
@@ -136,12 +201,21 @@ def _run_model(model_path: Path, kind: str, gender: str, poses, trans, betas, sr
     with torch.no_grad():
         for s in range(0, poses.shape[0], _CHUNK):
             p, n = poses[s : s + _CHUNK], len(poses[s : s + _CHUNK])
-            kw = dict(betas=f32(np.repeat(betas[None], n, 0)), global_orient=f32(p[:, :3]), body_pose=f32(p[:, 3:66]),
-                      left_hand_pose=f32(p[:, hands[0] : hands[1]]), right_hand_pose=f32(p[:, hands[1] : hands[2]]),
-                      transl=f32(trans[s : s + _CHUNK]))  # fmt: skip
+            kw = dict(
+                betas=f32(np.repeat(betas[None], n, 0)),
+                global_orient=f32(p[:, :3]),
+                body_pose=f32(p[:, 3:66]),
+                left_hand_pose=f32(p[:, hands[0] : hands[1]]),
+                right_hand_pose=f32(p[:, hands[1] : hands[2]]),
+                transl=f32(trans[s : s + _CHUNK]),
+            )
             if kind == "smplx":
-                kw.update(jaw_pose=f32(p[:, 66:69]), leye_pose=f32(p[:, 69:72]), reye_pose=f32(p[:, 72:75]),
-                          expression=torch.zeros(n, model.num_expression_coeffs))  # fmt: skip
+                kw.update(
+                    jaw_pose=f32(p[:, 66:69]),
+                    leye_pose=f32(p[:, 69:72]),
+                    reye_pose=f32(p[:, 72:75]),
+                    expression=torch.zeros(n, model.num_expression_coeffs),
+                )
             out.append(model(**kw).joints[:, idx].numpy().astype(np.float64))
         rest = model(betas=f32(betas[None])).vertices[0].numpy()
     return np.concatenate(out), float(rest[:, 1].max() - rest[:, 1].min())
@@ -158,9 +232,15 @@ def read_amass(path: str | Path, body_model: str | Path | None = None) -> HumanC
     poses, trans, betas, gender = _validate(data, src)
     kind = _POSE_DIMS[poses.shape[1]]
     if body_model is None:
-        raise InputError(src, "body_model", f"AMASS stores {_DISPLAY[kind]} parameters, not joint positions: pass --body-model PATH "
-                         "(your licensed SMPL+H or SMPL-X model file or folder)")  # fmt: skip
+        raise InputError(
+            src,
+            "body_model",
+            f"AMASS stores {_DISPLAY[kind]} parameters, not joint positions: pass --body-model PATH "
+            "(your licensed SMPL+H or SMPL-X model file or folder)",
+        )
     model_file = _model_file(body_model, kind, gender, src)
     joints, height = _run_model(model_file, kind, gender, poses, trans, betas, src)
     height = height if 0.3 < height < 3.0 else None
-    return HumanClip(SMPLH_SKELETON, joints, float(data["fps"][0]), src, subject_height=height, joint_quat=global_orientations(poses))
+    return HumanClip(
+        SMPLH_SKELETON, joints, float(data["fps"][0]), src, subject_height=height, joint_quat=global_orientations(poses)
+    )

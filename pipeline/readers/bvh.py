@@ -136,11 +136,21 @@ def _parse_motion(lines: list[str], start: int, n_channels: int, src: str) -> tu
     rows = rest[2:]
     if len(rows) != frames:
         what = "(truncated?)" if len(rows) < frames else "(extra rows)"
-        raise InputError(src, "MOTION", f"file has {len(rows)} motion rows but Frames: says {frames} {what}", frame=min(len(rows), frames))
+        raise InputError(
+            src,
+            "MOTION",
+            f"file has {len(rows)} motion rows but Frames: says {frames} {what}",
+            frame=min(len(rows), frames),
+        )
     tokens = [ln.split() for _, ln in rows]
     for k, t in enumerate(tokens):
         if len(t) != n_channels:
-            raise InputError(src, f"MOTION line {rows[k][0]}", f"has {len(t)} values, the hierarchy has {n_channels} channels", frame=k)
+            raise InputError(
+                src,
+                f"MOTION line {rows[k][0]}",
+                f"has {len(t)} values, the hierarchy has {n_channels} channels",
+                frame=k,
+            )
     try:
         motion = np.array(tokens, dtype=np.float64).reshape(frames, n_channels)
     except ValueError:
@@ -264,12 +274,18 @@ def read_bvh(
     raw_height = _rest_height(data, A) or estimate_height(p, skeleton)
     if units == "auto":
         if raw_height is None:
-            raise InputError(src, "units", "cannot guess units (no upright rest pose, no head/ankle joints); pass units=")
+            raise InputError(
+                src, "units", "cannot guess units (no upright rest pose, no head/ankle joints); pass units="
+            )
         units = guess_units(raw_height)
     s = unit_scale(units, src)
     R = np.einsum("ab,tjbc->tjac", A, rot[:, joints])
     quat = wxyz_from_rotation(Rotation.from_matrix(R.reshape(-1, 3, 3))).reshape(R.shape[0], len(joints), 4)
-    height = subject_height if subject_height is not None else plausible_height(None if raw_height is None else raw_height * s)
+    height = (
+        subject_height
+        if subject_height is not None
+        else plausible_height(None if raw_height is None else raw_height * s)
+    )
     return HumanClip(skeleton, p * s, frame_rate(data.frame_time), src, subject_height=height, joint_quat=quat)
 
 

@@ -119,7 +119,12 @@ def read_c3d(path: str | Path, *, up: str = "auto", max_gap: float = 0.25, long_
         gaps = [(a, b) for a, b in runs(miss) if b - a > limit]
         if gaps and long_gaps == "error":
             a, b = gaps[0]
-            raise InputError(src, f"marker {name}", f"gap of {b - a} frames ({a}-{b - 1}) is longer than max_gap {max_gap} s", frame=int(a))
+            raise InputError(
+                src,
+                f"marker {name}",
+                f"gap of {b - a} frames ({a}-{b - 1}) is longer than max_gap {max_gap} s",
+                frame=int(a),
+            )
         long_runs += [f"{name} {a}-{b - 1}" for a, b in gaps]
         if gaps and long_gaps == "drop":
             continue

@@ -39,9 +39,13 @@ HEAD_TO_ANKLE_TO_STATURE = 1.118
 
 
 _PICKLE_ALLOWED = {
-    ("numpy", "ndarray"), ("numpy", "dtype"), ("numpy.core.multiarray", "_reconstruct"),
-    ("numpy._core.multiarray", "_reconstruct"), ("numpy.core.multiarray", "scalar"), ("numpy._core.multiarray", "scalar"),
-}  # fmt: skip
+    ("numpy", "ndarray"),
+    ("numpy", "dtype"),
+    ("numpy.core.multiarray", "_reconstruct"),
+    ("numpy._core.multiarray", "_reconstruct"),
+    ("numpy.core.multiarray", "scalar"),
+    ("numpy._core.multiarray", "scalar"),
+}
 
 
 class _NumpyUnpickler(pickle.Unpickler):
@@ -65,7 +69,9 @@ def load_numpy_pickle(path: str | Path, field: str = "pickle"):
 def unit_scale(units: str, source: str | Path) -> float:
     """Metres per file unit for an explicit unit name (``"auto"`` is resolved by the caller)."""
     if units not in UNIT_SCALE:
-        raise InputError(source, "units", f"unknown units {units!r}; use one of 'auto', {', '.join(map(repr, UNIT_SCALE))}")
+        raise InputError(
+            source, "units", f"unknown units {units!r}; use one of 'auto', {', '.join(map(repr, UNIT_SCALE))}"
+        )
     return UNIT_SCALE[units]
 
 
@@ -132,7 +138,14 @@ def plausible_height(h: float | None) -> float | None:
 
 
 def keypoints_clip(
-    pos: np.ndarray, names, parents, fps: float, source: str, *, units: str = "m", up: str = "z",
+    pos: np.ndarray,
+    names,
+    parents,
+    fps: float,
+    source: str,
+    *,
+    units: str = "m",
+    up: str = "z",
     subject_height: float | None = None,
 ) -> HumanClip:
     """Validated z-up metre clip from raw ``[T, J, 3]`` positions in the file's units and axes."""
@@ -156,7 +169,9 @@ def keypoints_clip(
     if units == "auto":
         raw = estimate_height(pos, skeleton)
         if raw is None:
-            raise InputError(source, "units", "cannot guess units without head/ankle joints; pass units='m' (or cm, mm, inch)")
+            raise InputError(
+                source, "units", "cannot guess units without head/ankle joints; pass units='m' (or cm, mm, inch)"
+            )
         units = guess_units(raw)
     pos = pos * unit_scale(units, source)
     height = subject_height if subject_height is not None else plausible_height(estimate_height(pos, skeleton))
@@ -249,7 +264,9 @@ def read_keypoints_csv(
             raise InputError(src, "time", "needs at least two rows to give a frame rate")
         if not np.all(dt > 0):
             k = int(np.flatnonzero(dt <= 0)[0]) + 1
-            raise InputError(src, "time", f"is not increasing ({values[k - 1, time_col]} then {values[k, time_col]})", frame=k)
+            raise InputError(
+                src, "time", f"is not increasing ({values[k - 1, time_col]} then {values[k, time_col]})", frame=k
+            )
         if np.ptp(dt) > 0.01 * np.median(dt):
             raise InputError(src, "time", "is not uniformly sampled (resample to a fixed rate first, or pass fps=)")
         fps = 1.0 / float(np.median(dt))

@@ -45,7 +45,8 @@ def _get(obj, name: str, default=None):
 
 
 def _stamp(ts) -> float:
-    """Seconds from a Foxglove / protobuf / ROS 2 time (``sec``+``nsec`` / ``seconds``+``nanos`` / ``sec``+``nanosec``)."""
+    """Seconds from a Foxglove / protobuf / ROS 2 time (``sec``+``nsec`` / ``seconds``+``nanos`` /
+    ``sec``+``nanosec``)."""
     if ts is None:
         return 0.0
     sec = _get(ts, "sec", None)
@@ -112,21 +113,42 @@ def _transforms(schema_name: str, msg) -> list[tuple[float, str, str, list[float
     elif schema_name == "tf2_msgs/msg/TFMessage":
         for tf in _get(msg, "transforms", []) or []:
             h, tr = _get(tf, "header"), _get(tf, "transform")
-            out.append((_stamp(_get(h, "stamp")), _get(h, "frame_id", ""), _get(tf, "child_frame_id", ""),
-                        _vec(_get(tr, "translation")), _vec(_get(tr, "rotation"), ("x", "y", "z", "w"))))  # fmt: skip
+            out.append(
+                (
+                    _stamp(_get(h, "stamp")),
+                    _get(h, "frame_id", ""),
+                    _get(tf, "child_frame_id", ""),
+                    _vec(_get(tr, "translation")),
+                    _vec(_get(tr, "rotation"), ("x", "y", "z", "w")),
+                )
+            )
         return out
     else:  # RigidBodies
         h = _get(msg, "header")
         parent, stamp = _get(h, "frame_id", "") or "world", _stamp(_get(h, "stamp"))
         for rb in _get(msg, "rigidbodies", []) or []:
             pose = _get(rb, "pose")
-            out.append((stamp, parent, _get(rb, "rigid_body_name", ""), _vec(_get(pose, "position")),
-                        _vec(_get(pose, "orientation"), ("x", "y", "z", "w"))))  # fmt: skip
+            out.append(
+                (
+                    stamp,
+                    parent,
+                    _get(rb, "rigid_body_name", ""),
+                    _vec(_get(pose, "position")),
+                    _vec(_get(pose, "orientation"), ("x", "y", "z", "w")),
+                )
+            )
         return out
     for tf in items:
         rot = _get(tf, "rotation")
-        out.append((_stamp(_get(tf, "timestamp")), _get(tf, "parent_frame_id", ""), _get(tf, "child_frame_id", ""),
-                    _vec(_get(tf, "translation")), None if rot is None else _vec(rot, ("x", "y", "z", "w"))))  # fmt: skip
+        out.append(
+            (
+                _stamp(_get(tf, "timestamp")),
+                _get(tf, "parent_frame_id", ""),
+                _get(tf, "child_frame_id", ""),
+                _vec(_get(tf, "translation")),
+                None if rot is None else _vec(rot, ("x", "y", "z", "w")),
+            )
+        )
     return out
 
 
@@ -146,12 +168,19 @@ def _collect(path: str | Path, topics: list[str] | None) -> dict[str, _Track]:
             reader = make_reader(f, decoder_factories=_decoder_factories())
             summary = reader.get_summary()
             if summary is None:
-                raise InputError(src, "summary", "the MCAP has no summary section (not finalised?); re-save it with `mcap recover`")
-            have = {c.topic: summary.schemas[c.schema_id].name if c.schema_id in summary.schemas else "(no schema)" for c in summary.channels.values()}
+                raise InputError(
+                    src, "summary", "the MCAP has no summary section (not finalised?); re-save it with `mcap recover`"
+                )
+            have = {
+                c.topic: summary.schemas[c.schema_id].name if c.schema_id in summary.schemas else "(no schema)"
+                for c in summary.channels.values()
+            }
             use = [t for t, s in have.items() if s in SUPPORTED and (topics is None or t in topics)]
             if not use:
                 listing = ", ".join(f"{t} ({s})" for t, s in sorted(have.items())) or "no topics"
-                raise InputError(src, "topics", f"no FrameTransform(s), TFMessage or RigidBodies stream; the file has: {listing}")
+                raise InputError(
+                    src, "topics", f"no FrameTransform(s), TFMessage or RigidBodies stream; the file has: {listing}"
+                )
             for k, (schema, channel, message, decoded) in enumerate(reader.iter_decoded_messages(topics=use)):
                 for stamp, parent, child, t, q in _transforms(schema.name, decoded):
                     _add(tracks, src, channel.topic, k, (stamp, message.log_time * 1e-9), parent, child, t, q)

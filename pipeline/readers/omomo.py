@@ -51,7 +51,7 @@ import numpy as np
 from pipeline.clip import HumanClip, ObjectTrack
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.geometry import MeshGeometry
-from pipeline.readers.amass import SMPLH_JOINT_NAMES, SMPLH_SKELETON, SMPLH_FINGERS
+from pipeline.readers.amass import SMPLH_FINGERS, SMPLH_JOINT_NAMES, SMPLH_SKELETON
 from pipeline.readers.keypoints import estimate_height, load_numpy_pickle, plausible_height
 from pipeline.rotations import xyzw_to_wxyz
 
@@ -59,12 +59,35 @@ FPS = 30.0
 COLUMNS = 591
 #: The file's body order, written with SMPL-H names.
 FILE_BODY_ORDER: tuple[str, ...] = (
-    "pelvis", "left_hip", "left_knee", "left_ankle", "left_foot", "right_hip", "right_knee", "right_ankle",
-    "right_foot", "spine1", "spine2", "spine3", "neck", "head", "left_collar", "left_shoulder", "left_elbow",
-    "left_wrist",
-) + tuple(f"left_{f}" for f in SMPLH_FINGERS) + (
-    "right_collar", "right_shoulder", "right_elbow", "right_wrist",
-) + tuple(f"right_{f}" for f in SMPLH_FINGERS)  # fmt: skip
+    (
+        "pelvis",
+        "left_hip",
+        "left_knee",
+        "left_ankle",
+        "left_foot",
+        "right_hip",
+        "right_knee",
+        "right_ankle",
+        "right_foot",
+        "spine1",
+        "spine2",
+        "spine3",
+        "neck",
+        "head",
+        "left_collar",
+        "left_shoulder",
+        "left_elbow",
+        "left_wrist",
+    )
+    + tuple(f"left_{f}" for f in SMPLH_FINGERS)
+    + (
+        "right_collar",
+        "right_shoulder",
+        "right_elbow",
+        "right_wrist",
+    )
+    + tuple(f"right_{f}" for f in SMPLH_FINGERS)
+)
 TO_SMPLH = np.array([FILE_BODY_ORDER.index(n) for n in SMPLH_JOINT_NAMES])
 
 _HULL_NAMES = ("box", "suitcase")
@@ -93,11 +116,17 @@ def _load_tensor(path: str | Path) -> np.ndarray:
 
 
 def _check_finite(a: np.ndarray, src: str) -> None:
-    for name, cols in (("body positions", slice(162, 318)), ("object pose", slice(318, 325)),
-                       ("contacts", slice(330, 383)), ("body quaternions", slice(383, 591))):  # fmt: skip
+    for name, cols in (
+        ("body positions", slice(162, 318)),
+        ("object pose", slice(318, 325)),
+        ("contacts", slice(330, 383)),
+        ("body quaternions", slice(383, 591)),
+    ):
         bad = ~np.isfinite(a[:, cols])
         if bad.any():
-            raise InputError(src, f"{name} (columns {cols.start}:{cols.stop})", "is NaN or infinite", frame=first_bad_frame(bad))
+            raise InputError(
+                src, f"{name} (columns {cols.start}:{cols.stop})", "is NaN or infinite", frame=first_bad_frame(bad)
+            )
 
 
 def parse_name(path: str | Path) -> tuple[str | None, str | None]:
@@ -122,7 +151,9 @@ def find_mesh(path: str | Path, obj: str | None) -> Path:
     for n in names:
         if (folder / n).is_file():
             return folder / n
-    raise InputError(src, "mesh", f"no mesh for object {obj!r} in {folder} (looked for {', '.join(names)}); pass mesh=PATH")
+    raise InputError(
+        src, "mesh", f"no mesh for object {obj!r} in {folder} (looked for {', '.join(names)}); pass mesh=PATH"
+    )
 
 
 def _load_mesh(mesh: Path, src: str):
@@ -191,4 +222,13 @@ def read_omomo(path: str | Path, *, mesh: str | Path | None = None, subject_heig
     track = ObjectTrack(obj_name, geometry, obj_pose, contact=a[:, 330] > 0.5, source=src)
     if subject_height is None:
         subject_height = height_from_dict(path, subject) or plausible_height(estimate_height(pos, SMPLH_SKELETON))
-    return HumanClip(SMPLH_SKELETON, pos, FPS, src, subject_height=subject_height, joint_quat=quat, contacts=contacts, objects=(track,))
+    return HumanClip(
+        SMPLH_SKELETON,
+        pos,
+        FPS,
+        src,
+        subject_height=subject_height,
+        joint_quat=quat,
+        contacts=contacts,
+        objects=(track,),
+    )

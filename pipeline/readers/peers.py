@@ -64,7 +64,9 @@ def reorder_joints(names, src: str) -> np.ndarray:
         raise InputError(src, "joint_names", f"missing G1 joints: {', '.join(missing)}")
     if len(names) != len(G1_JOINT_NAMES):
         extra = [n for n in names if n not in G1_JOINT_NAMES]
-        raise InputError(src, "joint_names", f"{len(names)} names for 29 G1 joints (unknown: {', '.join(extra) or 'duplicates'})")
+        raise InputError(
+            src, "joint_names", f"{len(names)} names for 29 G1 joints (unknown: {', '.join(extra) or 'duplicates'})"
+        )
     return np.array([names.index(n) for n in G1_JOINT_NAMES])
 
 
@@ -91,8 +93,12 @@ def _object_name(d, given: str | None) -> str:
 
 
 def read_beyondmimic_npz(
-    path: str | Path, *, object_geometry: ObjectGeometry | None = None, object_scale: float = 1.0,
-    object_name: str | None = None, joint_names: list[str] | None = None,
+    path: str | Path,
+    *,
+    object_geometry: ObjectGeometry | None = None,
+    object_scale: float = 1.0,
+    object_name: str | None = None,
+    joint_names: list[str] | None = None,
 ) -> RobotClip:
     """A BeyondMimic / mjlab motion ``.npz`` as a :class:`RobotClip` (see the module doc)."""
     src = str(path)
@@ -107,17 +113,29 @@ def read_beyondmimic_npz(
         raise InputError(src, "joint_names", "missing: the joint order is unknown; pass joint_names=")
     joints = jp[:, -29:][:, reorder_joints(names, src)]
     root = jp[:, :7] if jp.shape[1] == 36 else _root_from_bodies(d, src, T)
-    objects, provenance = (), {"format": "beyondmimic_npz", "file": src, "joint_order": "reordered by name to mjlab G1 order"}
+    objects, provenance = (
+        (),
+        {"format": "beyondmimic_npz", "file": src, "joint_order": "reordered by name to mjlab G1 order"},
+    )
     if "object_pos_w" in d:
         pose = np.concatenate([_array(d, "object_pos_w", 3, src, T), _array(d, "object_quat_w", 4, src, T)], axis=1)
         name = _object_name(d, object_name)
         if object_geometry is None:
-            warnings.warn(f"{src}: object {name!r} left out: pass object_geometry= to include it", UserWarning, stacklevel=2)
+            warnings.warn(
+                f"{src}: object {name!r} left out: pass object_geometry= to include it", UserWarning, stacklevel=2
+            )
             provenance["object_left_out"] = name
         else:
             geometry = object_geometry if object_scale == 1.0 else object_geometry.scaled(object_scale)
             objects = (ObjectTrack(name, geometry, pose, source=src),)
-    return RobotClip(np.concatenate([root, joints], axis=1), fps, src, objects=objects, method="peer:beyondmimic_npz", provenance=provenance)
+    return RobotClip(
+        np.concatenate([root, joints], axis=1),
+        fps,
+        src,
+        objects=objects,
+        method="peer:beyondmimic_npz",
+        provenance=provenance,
+    )
 
 
 def read_gmr_pkl(path: str | Path) -> RobotClip:

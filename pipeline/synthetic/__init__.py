@@ -51,7 +51,8 @@ import numpy as np
 
 from pipeline.clip import HumanClip
 from pipeline.synthetic.body import HAND_OFFSET, Phase, SyntheticDemo
-from pipeline.synthetic.skeleton import JOINT_NAMES, OFFSETS as REST_OFFSETS, PARENTS, SKELETON, SUBJECT_HEIGHT
+from pipeline.synthetic.skeleton import JOINT_NAMES, PARENTS, SKELETON, SUBJECT_HEIGHT
+from pipeline.synthetic.skeleton import OFFSETS as REST_OFFSETS
 from pipeline.synthetic.tasks import carry, pickup, push, sit_stand
 
 TASKS = {"PickUp": pickup, "SitStand": sit_stand, "Push": push, "Carry": carry}
@@ -69,6 +70,15 @@ def default_clips(fps: float = 30.0, seed: int = 0) -> list[HumanClip]:
 
 
 __all__ = [
-    "HAND_OFFSET", "JOINT_NAMES", "PARENTS", "REST_OFFSETS", "SKELETON", "SUBJECT_HEIGHT", "TASKS",
-    "Phase", "SyntheticDemo", "default_clips", "default_demos",
-]  # fmt: skip
+    "HAND_OFFSET",
+    "JOINT_NAMES",
+    "PARENTS",
+    "REST_OFFSETS",
+    "SKELETON",
+    "SUBJECT_HEIGHT",
+    "TASKS",
+    "Phase",
+    "SyntheticDemo",
+    "default_clips",
+    "default_demos",
+]

@@ -8,7 +8,7 @@ import numpy as np
 
 from pipeline.clip import HumanClip, ObjectTrack
 from pipeline.synthetic.gait import GaitPlan, Keys, heading, lift_swing_feet, pelvis_height, smooth_below
-from pipeline.synthetic.skeleton import J, REST_PELVIS_Z, SKELETON, SUBJECT_HEIGHT, PoseTargets, solve_pose
+from pipeline.synthetic.skeleton import REST_PELVIS_Z, SKELETON, SUBJECT_HEIGHT, J, PoseTargets, solve_pose
 
 HAND_OFFSET = 0.04  # wrist joint centre outside the touched face: half a hand's thickness + palm
 WALK_DIP = 0.03  # the nominal pelvis height drops this much while walking (knees softer)
@@ -44,7 +44,7 @@ class Channels:
         start = dict(z=REST_PELVIS_Z, dx=0.0, pp=0.0, sp=0.0, hw=0.0)
         self.ch = {n: Keys(0.0, v) for n, v in start.items()}
 
-    def to(self, t0: float, t1: float, **values) -> "Channels":
+    def to(self, t0: float, t1: float, **values) -> Channels:
         """Hold each named channel until ``t0``, then move it to its value by ``t1``."""
         for name, v in values.items():
             k = self.ch[name]
@@ -98,11 +98,16 @@ def solve(body: Body, hand_target: np.ndarray):
     diff = np.einsum("tk,tk->t", body.ankles[:, 1, :2] - body.ankles[:, 0, :2], body.fwd)
     hw = body.ch["hw"]
     targets = PoseTargets(
-        pelvis=body.pelvis, yaw=body.yaw, pelvis_pitch=body.ch["pp"], spine_pitch=body.ch["sp"],
-        ankles=body.ankles, foot_yaw=body.foot_yaw, hand_target=hand_target,
+        pelvis=body.pelvis,
+        yaw=body.yaw,
+        pelvis_pitch=body.ch["pp"],
+        spine_pitch=body.ch["sp"],
+        ankles=body.ankles,
+        foot_yaw=body.foot_yaw,
+        hand_target=hand_target,
         hand_weight=np.repeat(np.asarray(hw)[:, None], 2, axis=1),
         arm_swing=ARM_SWING_GAIN * np.column_stack([diff, -diff]),
-    )  # fmt: skip
+    )
     return solve_pose(targets)
 
 
@@ -118,10 +123,14 @@ def grip_points(pose: np.ndarray, local: np.ndarray) -> np.ndarray:
     yaw = 2 * np.arctan2(pose[:, 6], pose[:, 3])
     c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
     x, y = local[:, 0][None], local[:, 1][None]
-    return np.stack([pose[:, None, 0] + c * x - s * y, pose[:, None, 1] + s * x + c * y, pose[:, None, 2] + local[:, 2][None]], -1)
+    return np.stack(
+        [pose[:, None, 0] + c * x - s * y, pose[:, None, 1] + s * x + c * y, pose[:, None, 2] + local[:, 2][None]], -1
+    )
 
 
-def make_demo(task: str, fps: float, body: Body, hand_target, objects: list[dict], phases, contacts: dict) -> SyntheticDemo:
+def make_demo(
+    task: str, fps: float, body: Body, hand_target, objects: list[dict], phases, contacts: dict
+) -> SyntheticDemo:
     """Solve the pose and assemble the validated, synthetic-labelled clip.
 
     ``objects``: dicts with ``name, geometry, pose, contact, mass``; ``contacts``: joint name ->
@@ -132,5 +141,16 @@ def make_demo(task: str, fps: float, body: Body, hand_target, objects: list[dict
     for name, c in contacts.items():
         flags[:, J[name]] = c
     tracks = tuple(ObjectTrack(source=source, **o) for o in objects)
-    clip = HumanClip(SKELETON, pos, fps, source, subject_height=SUBJECT_HEIGHT, joint_quat=quat, contacts=flags, objects=tracks, task=task, synthetic=True)
+    clip = HumanClip(
+        SKELETON,
+        pos,
+        fps,
+        source,
+        subject_height=SUBJECT_HEIGHT,
+        joint_quat=quat,
+        contacts=flags,
+        objects=tracks,
+        task=task,
+        synthetic=True,
+    )
     return SyntheticDemo(clip, tuple(Phase(n, round(a, 6), round(b, 6)) for n, a, b in phases), body.stance)

@@ -39,13 +39,13 @@ class Keys:
     def __init__(self, t0: float, value):
         self.keys = [(float(t0), np.asarray(value, dtype=float))]
 
-    def set(self, t: float, value) -> "Keys":
+    def set(self, t: float, value) -> Keys:
         if t <= self.keys[-1][0]:
             raise ValueError(f"key at {t} is not after {self.keys[-1][0]}")
         self.keys.append((float(t), np.asarray(value, dtype=float)))
         return self
 
-    def hold(self, t: float) -> "Keys":
+    def hold(self, t: float) -> Keys:
         return self.set(t, self.keys[-1][1])
 
     @property
@@ -70,7 +70,9 @@ def _rot2(yaw: float) -> np.ndarray:
 
 def slot(centre, yaw: float, side: int) -> np.ndarray:
     """Ankle xy of foot ``side`` (0 left, 1 right) in the stance (centre, yaw)."""
-    return np.asarray(centre, float) + _rot2(yaw) @ np.array([0.0, STANCE_HALF_WIDTH if side == 0 else -STANCE_HALF_WIDTH])
+    return np.asarray(centre, float) + _rot2(yaw) @ np.array(
+        [0.0, STANCE_HALF_WIDTH if side == 0 else -STANCE_HALF_WIDTH]
+    )
 
 
 def heading(yaw) -> np.ndarray:
@@ -113,7 +115,9 @@ class GaitPlan:
             raise ValueError(f"gait key at {t:.3f} s is not after the previous one at {self.keys[-1][0]:.3f} s")
         self.keys.append((float(t), np.asarray(centre, float) + PELVIS_FWD * heading(yaw), float(yaw)))
 
-    def walk(self, t: float, stances: list[tuple], *, period=0.5, swing=0.4, clearance=0.07, first: int = 0, settle=0.25) -> float:
+    def walk(
+        self, t: float, stances: list[tuple], *, period=0.5, swing=0.4, clearance=0.07, first: int = 0, settle=0.25
+    ) -> float:
         """Step through ``stances`` [(centre, yaw), ...], shifting weight from ``t`` and lifting the
         first foot at ``t + 0.15``, then close the feet. Returns when the walker stands still."""
         if t > self.keys[-1][0] + 1e-9:
@@ -157,7 +161,10 @@ class GaitPlan:
         centre = np.asarray(centre, float)
         yaw = self.yaw if yaw is None else yaw
         n = max(1, int(np.ceil(np.linalg.norm(centre - self.centre) / max_step - 1e-9)))
-        stances = [(self.centre + (centre - self.centre) * (k / n), self.yaw + (yaw - self.yaw) * (k / n)) for k in range(1, n + 1)]
+        stances = [
+            (self.centre + (centre - self.centre) * (k / n), self.yaw + (yaw - self.yaw) * (k / n))
+            for k in range(1, n + 1)
+        ]
         return self.walk(t, stances, **kw)
 
     def stance_frames(self, t: np.ndarray) -> np.ndarray:

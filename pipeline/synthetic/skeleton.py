@@ -23,11 +23,29 @@ from pipeline.clip import Skeleton
 from pipeline.rotations import wxyz_from_rotation
 
 JOINT_NAMES = (
-    "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",
-    "left_ankle", "right_ankle", "spine3", "left_foot", "right_foot", "neck", "left_collar",
-    "right_collar", "head", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow",
-    "left_wrist", "right_wrist",
-)  # fmt: skip
+    "pelvis",
+    "left_hip",
+    "right_hip",
+    "spine1",
+    "left_knee",
+    "right_knee",
+    "spine2",
+    "left_ankle",
+    "right_ankle",
+    "spine3",
+    "left_foot",
+    "right_foot",
+    "neck",
+    "left_collar",
+    "right_collar",
+    "head",
+    "left_shoulder",
+    "right_shoulder",
+    "left_elbow",
+    "right_elbow",
+    "left_wrist",
+    "right_wrist",
+)
 PARENTS = (-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19)
 SKELETON = Skeleton(JOINT_NAMES, PARENTS)
 J = {name: i for i, name in enumerate(JOINT_NAMES)}
@@ -35,15 +53,23 @@ SUBJECT_HEIGHT = 1.70
 
 # Offsets from the parent joint in the rest pose; left side listed, right side mirrored (y -> -y).
 _LEFT = {
-    "left_hip": (-0.005, 0.070, -0.090), "left_knee": (0.005, 0.034, -0.375),
-    "left_ankle": (-0.030, -0.015, -0.385), "left_foot": (0.130, 0.025, -0.055),
-    "left_collar": (-0.010, 0.070, 0.120), "left_shoulder": (-0.010, 0.105, 0.045),
-    "left_elbow": (0.000, 0.300, 0.000), "left_wrist": (0.000, 0.270, 0.000),
-}  # fmt: skip
+    "left_hip": (-0.005, 0.070, -0.090),
+    "left_knee": (0.005, 0.034, -0.375),
+    "left_ankle": (-0.030, -0.015, -0.385),
+    "left_foot": (0.130, 0.025, -0.055),
+    "left_collar": (-0.010, 0.070, 0.120),
+    "left_shoulder": (-0.010, 0.105, 0.045),
+    "left_elbow": (0.000, 0.300, 0.000),
+    "left_wrist": (0.000, 0.270, 0.000),
+}
 _CENTRE = {
-    "pelvis": (0.0, 0.0, 0.0), "spine1": (-0.010, 0.0, 0.110), "spine2": (0.005, 0.0, 0.135),
-    "spine3": (0.000, 0.0, 0.055), "neck": (-0.015, 0.0, 0.205), "head": (0.045, 0.0, 0.090),
-}  # fmt: skip
+    "pelvis": (0.0, 0.0, 0.0),
+    "spine1": (-0.010, 0.0, 0.110),
+    "spine2": (0.005, 0.0, 0.135),
+    "spine3": (0.000, 0.0, 0.055),
+    "neck": (-0.015, 0.0, 0.205),
+    "head": (0.045, 0.0, 0.090),
+}
 
 
 def _offsets() -> np.ndarray:
@@ -169,7 +195,9 @@ def solve_pose(p: PoseTargets) -> tuple[np.ndarray, np.ndarray]:
         sign = 1.0 if side == 0 else -1.0
         place(hip)
         pole = _apply(rot_z(p.foot_yaw[:, side] + sign * KNEE_OUT), np.array([1.0, 0.0, 0.0]))
-        R[:, hip], R[:, knee] = two_link(P[:, hip], p.ankles[:, side], OFFSETS[knee], OFFSETS[ankle], pole, np.array([1.0, 0, 0]))
+        R[:, hip], R[:, knee] = two_link(
+            P[:, hip], p.ankles[:, side], OFFSETS[knee], OFFSETS[ankle], pole, np.array([1.0, 0, 0])
+        )
         place(knee)
         place(ankle)
         R[:, ankle] = R[:, foot] = rot_z(p.foot_yaw[:, side])
@@ -185,7 +213,9 @@ def solve_pose(p: PoseTargets) -> tuple[np.ndarray, np.ndarray]:
         w = p.hand_weight[:, side, None]
         target = (1 - w) * free + w * p.hand_target[:, side]
         pole = _apply(Ryaw, ELBOW_POLE * (1.0, sign, 1.0))
-        R[:, shoulder], R[:, elbow] = two_link(P[:, shoulder], target, OFFSETS[elbow], OFFSETS[wrist], pole, np.array([-1.0, 0, 0]))
+        R[:, shoulder], R[:, elbow] = two_link(
+            P[:, shoulder], target, OFFSETS[elbow], OFFSETS[wrist], pole, np.array([-1.0, 0, 0])
+        )
         place(elbow)
         place(wrist)
         R[:, wrist] = R[:, elbow]

@@ -74,7 +74,12 @@ def _lift_box(rng, fps: float, task: str, carry: bool):
         t_rel = t1 + 1.2
         ch.to(t_rel, t_rel + 0.6, hw=0.0)
         ch.to(t_rel + 0.2, t_rel + 1.2, z=0.93, dx=0.0, pp=0.0, sp=0.0)
-        phases += [("put_down", t1, t1 + 1.0), ("settle", t1 + 1.0, t_rel), ("release", t_rel, t_rel + 0.6), ("rise", t_rel + 0.2, t_rel + 1.2)]
+        phases += [
+            ("put_down", t1, t1 + 1.0),
+            ("settle", t1 + 1.0, t_rel),
+            ("release", t_rel, t_rel + 0.6),
+            ("rise", t_rel + 0.2, t_rel + 1.2),
+        ]
         t_end, put = t_rel + 1.4, (t1, box1, yaw1)
         phases.append(("stand", t_rel + 1.2, t_end))
     ts = _time_grid(t_end, fps)
@@ -142,16 +147,35 @@ def sit_stand(rng, fps: float):
     ch.to(t_up, t_up + 0.5, pp=0.35, sp=0.4).to(t_up + 0.5, t_up + 1.3, pp=0.0, sp=0.0)
     ch.to(t_up, t_up + 0.5, hw=0.0).to(t_up + 0.1, t_up + 1.1, dx=0.0).to(t_up + 0.3, t_up + 1.3, z=0.93)
     t_end = t_up + 1.6
-    phases += [("sit_down", t, t_sit), ("seated", t_sit, t_up), ("stand_up", t_up, t_up + 1.3), ("stand", t_up + 1.3, t_end)]
+    phases += [
+        ("sit_down", t, t_sit),
+        ("seated", t_sit, t_up),
+        ("stand_up", t_up, t_up + 1.3),
+        ("stand", t_up + 1.3, t_end),
+    ]
     ts = _time_grid(t_end, fps)
     body = evaluate(ts, g, ch)
     # while seated the hands rest on the thighs (no object contact)
     side = np.stack([-np.sin(body.yaw), np.cos(body.yaw)], -1)
     thigh = body.pelvis[:, :2] + 0.24 * body.fwd
-    target = np.stack([np.column_stack([thigh + 0.13 * side, body.pelvis[:, 2] + 0.04]), np.column_stack([thigh - 0.13 * side, body.pelvis[:, 2] + 0.04])], 1)
+    target = np.stack(
+        [
+            np.column_stack([thigh + 0.13 * side, body.pelvis[:, 2] + 0.04]),
+            np.column_stack([thigh - 0.13 * side, body.pelvis[:, 2] + 0.04]),
+        ],
+        1,
+    )
     seated = (ts >= t_sit - 1e-9) & (ts <= t_up + 1e-9)
-    chair = dict(name=OBJECT_NAME, geometry=CHAIR, pose=yaw_pose(np.tile([cx, 0.0, 0.0], (len(ts), 1)), np.pi), contact=seated, mass=CHAIR_MASS)
-    return make_demo("SitStand", fps, body, target, [chair], phases, {"pelvis": seated, "left_hip": seated, "right_hip": seated})
+    chair = dict(
+        name=OBJECT_NAME,
+        geometry=CHAIR,
+        pose=yaw_pose(np.tile([cx, 0.0, 0.0], (len(ts), 1)), np.pi),
+        contact=seated,
+        mass=CHAIR_MASS,
+    )
+    return make_demo(
+        "SitStand", fps, body, target, [chair], phases, {"pelvis": seated, "left_hip": seated, "right_hip": seated}
+    )
 
 
 def push(rng, fps: float):
@@ -167,7 +191,14 @@ def push(rng, fps: float):
     ch.to(t1, t1 + 0.6, hw=0.0, pp=0.0, sp=0.0)
     t2 = g.walk_straight(t1 + 0.5, (face - PUSH_STAND + 0.7, 0.0), period=0.6, swing=0.42, clearance=0.04)
     t_end = t2 + 0.3
-    phases += [("reach", t, t + 0.7), ("brace", t + 0.7, t_push), ("push", t_push, t1), ("release", t1, t1 + 0.6), ("step_back", t1 + 0.5, t2), ("stand", t2, t_end)]
+    phases += [
+        ("reach", t, t + 0.7),
+        ("brace", t + 0.7, t_push),
+        ("push", t_push, t1),
+        ("release", t1, t1 + 0.6),
+        ("step_back", t1 + 0.5, t2),
+        ("stand", t2, t_end),
+    ]
     ts = _time_grid(t_end, fps)
     body = evaluate(ts, g, ch)
     i0 = np.searchsorted(ts, t_push)
@@ -178,5 +209,7 @@ def push(rng, fps: float):
     hw = body.ch["hw"]
     target = grip_points(pose, LARGE_GRIP) + _approach([[-1.0, 0.0, 0.0]] * 2, hw, out=0.08, up=0.0)
     touch = hw >= 1.0
-    obj = dict(name=OBJECT_NAME, geometry=LARGE_BOX, pose=pose, contact=touch, mass=LARGE_BOX_MASS, friction=LARGE_BOX_FRICTION)
+    obj = dict(
+        name=OBJECT_NAME, geometry=LARGE_BOX, pose=pose, contact=touch, mass=LARGE_BOX_MASS, friction=LARGE_BOX_FRICTION
+    )
     return make_demo("Push", fps, body, target, [obj], phases, {"left_wrist": touch, "right_wrist": touch})
