@@ -1,4 +1,4 @@
-"""Speed and accuracy of the distance fields (:mod:`pipeline.distance_field`), per CPU-second, one thread.
+"""Speed and accuracy of the distance fields (:mod:`pipeline.distance.field`), per CPU-second, one thread.
 
     python bench/bench_distance_field.py [--points 1000000] [--mesh-points 300000] [--repeat 3]
                                          [--mesh ../shared/mocap/intermimic/largetable_largetable.obj]
@@ -35,9 +35,9 @@ import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
-from pipeline.distance_field import ObjectField  # noqa: E402
-from pipeline.distance_mesh import MeshShape, _numpy_exact  # noqa: E402
-from pipeline.distance_octree import CachedField, OctreeSpec  # noqa: E402
+from pipeline.distance.field import ObjectField  # noqa: E402
+from pipeline.distance.mesh import MeshShape, _numpy_exact  # noqa: E402
+from pipeline.distance.octree import CachedField, OctreeSpec  # noqa: E402
 from pipeline.geometry import Chair, Primitive  # noqa: E402
 
 RNG = np.random.default_rng(0)

@@ -29,8 +29,8 @@ from bench_distance_field import SCAN, bench_mesh, bench_primitives  # noqa: E40
 
 
 def bench_stage(name: str) -> None:
-    from pipeline.cli import main as cli
-    from pipeline.ingest import stage_dir
+    from lessmimic.cli import main as cli
+    from pipeline.stage.paths import stage_dir
 
     if not (stage_dir(name, "retargeted") / "meta" / "info.json").is_file():
         assert cli(["retarget", "--name", name]) == 0

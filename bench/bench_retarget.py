@@ -1,7 +1,7 @@
 """Retarget quality and speed, ours vs the OmniRetarget output of the same OMOMO clip, side by side.
 
 Run: ``make bench-retarget`` (needs ``../shared/mocap``; clips that are missing are skipped).
-Every row is measured by :func:`pipeline.metrics.retarget_metrics` with OUR collision model.
+Every row is measured by :func:`retarget.metrics.retarget_metrics` with OUR collision model.
 ``frames/s`` counts the robot's 50 Hz output frames over the whole clip (scene build, IK,
 metrics; one process, one core, after one untimed warm-up clip; the best of ``REPEATS`` runs, since
 this machine's other load makes single timings vary by +-30%); ``src frames/s`` counts the source's own frames.
@@ -20,8 +20,8 @@ import torch
 torch.set_num_threads(1)
 
 from pipeline.default_input import default_clips  # noqa: E402
-from pipeline.metrics import evaluate_file  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
+from retarget.metrics import evaluate_file  # noqa: E402
 from retarget.stage import retarget_clip  # noqa: E402
 
 REPEATS = 3

@@ -2,10 +2,10 @@
 
 For every frame of a :class:`pipeline.clip.PhysicalizedClip`, the links of :class:`FeatureConfig`
 are placed by MuJoCo forward kinematics of the simulated ``(qpos, qvel)``
-(:func:`pipeline.link_motion.link_motion`), the objects' exact distance fields are queried at the
-link origins with the simulated object poses (:class:`pipeline.distance_field.ObjectFields`: the
-nearest object per link), and the terms of :mod:`pipeline.interaction` and
-:mod:`pipeline.observations` are evaluated.
+(:func:`pipeline.terms.link_motion.link_motion`), the objects' exact distance fields are queried at the
+link origins with the simulated object poses (:class:`pipeline.distance.field.ObjectFields`: the
+nearest object per link), and the terms of :mod:`pipeline.terms.interaction` and
+:mod:`pipeline.terms.observations` are evaluated.
 """
 
 from __future__ import annotations
@@ -16,13 +16,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.clip import PhysicalizedClip
-from pipeline.distance_field import ObjectField, ObjectFields
+from pipeline.distance.field import ObjectField, ObjectFields
 from pipeline.errors import InputError
 from pipeline.geometry import MeshGeometry, geometry_to_dict
-from pipeline.interaction import DEMO_MAX_DISTANCE_M, demo_features, interaction_features, surface_point_velocity
-from pipeline.link_motion import link_motion
-from pipeline.observations import proprioception, root_command
 from pipeline.robot import G1_LINK_NAMES, LESSMIMIC_DEMO_DF_BODIES
+from pipeline.terms.interaction import DEMO_MAX_DISTANCE_M, demo_features, interaction_features, surface_point_velocity
+from pipeline.terms.link_motion import link_motion
+from pipeline.terms.observations import proprioception, root_command
 
 
 @dataclass(frozen=True)

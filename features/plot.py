@@ -17,7 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from pipeline.figure import save_figure  # noqa: E402
+from pipeline.stage.figure import save_figure  # noqa: E402
 
 
 def plot_df(df: np.ndarray, contact: np.ndarray | None, fps: float, title: str, path: Path) -> Path:

@@ -8,7 +8,7 @@ interaction features of :mod:`features.compute`: ``observation.df`` (the paper's
 (the released demo's 7 x 4 layout), ``observation.df_object`` (nearest object per link, with several
 objects), ``observation.root_command`` (12) and ``observation.proprio`` (93). The task label is the
 episode's LeRobot task. The dataset is written atomically; the stage takes seconds per clip. A rerun on
-the same physicalized dataset with the same config is up to date and does nothing (:mod:`pipeline.stage_state`).
+the same physicalized dataset with the same config is up to date and does nothing (:mod:`pipeline.stage.state`).
 """
 
 from __future__ import annotations
@@ -21,12 +21,12 @@ from tqdm import tqdm
 
 from features.compute import ClipFeatures, FeatureConfig, FieldCache, clip_features
 from pipeline.clip import PhysicalizedClip
-from pipeline.dataset import Feature
+from pipeline.dataset.schema import Feature
 from pipeline.errors import InputError
-from pipeline.interaction import DEMO_PARTS, DF_PARTS, feature_names
-from pipeline.link_motion import body_ids
-from pipeline.observations import PROPRIO_NAMES, ROOT_COMMAND_NAMES
 from pipeline.robot import g1_model
+from pipeline.terms.interaction import DEMO_PARTS, DF_PARTS, feature_names
+from pipeline.terms.link_motion import body_ids
+from pipeline.terms.observations import PROPRIO_NAMES, ROOT_COMMAND_NAMES
 
 CARD_NOTES = [
     "DF features follow LessMimic Sec. III-A: per link, phi = unsigned distance from the link's body origin to the "
@@ -36,7 +36,7 @@ CARD_NOTES = [
     "kinematics, not finite differences).",
     "The interaction window I_t is not stored: load it with LeRobot's `delta_timestamps`, e.g. "
     "`{'observation.df': [-0.08, -0.06, -0.04, -0.02, 0.0]}` for l = 5 at 50 fps (frames before the episode start are "
-    "padded and flagged `*_is_pad`), or with `pipeline.dataset_read.WindowDataset(root, keys, history=5)`.",
+    "padded and flagged `*_is_pad`), or with `pipeline.dataset.read.WindowDataset(root, keys, history=5)`.",
     "`observation.df_demo` is the input contract of the released LessMimic web demo: for its 7 query bodies, "
     "min(phi, 1 m) and grad in the body's own frame.",
 ]
@@ -120,13 +120,13 @@ def _any_contact(clip: PhysicalizedClip) -> np.ndarray | None:
 def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | None = None) -> dict:
     """``lessmimic features``: compute the features of every physicalized clip, write the dataset, report and plots."""
     from features.plot import plot_df
-    from pipeline.clip_dataset import episodes_to_physicalized_clips, physicalized_clips_to_episodes
-    from pipeline.dataset import write_dataset
-    from pipeline.dataset_card import DatasetCard
-    from pipeline.dataset_read import read_card
-    from pipeline.dataset_write import check_target
-    from pipeline.ingest import file_stem, stage_dir, write_json_atomic
-    from pipeline.stage_state import KEY, dataset_fingerprint, fingerprint, up_to_date
+    from pipeline.dataset.card import DatasetCard
+    from pipeline.dataset.clips import episodes_to_physicalized_clips, physicalized_clips_to_episodes
+    from pipeline.dataset.read import read_card
+    from pipeline.dataset.write import check_target, write_dataset
+    from pipeline.stage.atomic import write_json_atomic
+    from pipeline.stage.paths import file_stem, stage_dir
+    from pipeline.stage.state import KEY, dataset_fingerprint, fingerprint, up_to_date
 
     cfg = config or FeatureConfig()
     body_ids(g1_model(), cfg.query_links, "--links")  # an unknown link fails before any work

@@ -54,12 +54,10 @@ from scipy.spatial.transform import Rotation
 from physicalize.plan import plan_com
 from physicalize.reference import Reference, build_reference
 from physicalize.seat import SEAT_LINKS
-from physicalize.wbc import FOOT_BODIES, HAND_BODIES, NV_ROBOT, sole_corners
 from pipeline.foot_contact import runs
 from pipeline.ik_limits import FrameVelocityLimit, SeparationLimit
-from retarget.ik_config import joint_velocity_limits, self_collision_groups
-
-NQ_ROBOT = 36
+from pipeline.robot import FOOT_BODIES, HAND_BODIES, NQ_ROBOT, NV_ROBOT, joint_velocity_limits, sole_corners
+from pipeline.scene import self_collision_groups
 
 
 @dataclass(frozen=True)
@@ -213,7 +211,7 @@ def foot_targets(ref: Reference, sole_z: np.ndarray, tolerance: float = 0.02, cl
 
 class ReferenceIK:
     """The differential IK of the module docstring on a compiled scene (robot = the model's first tree,
-    ``qpos[:36]``; any further dofs, free objects, are frozen). Reusable across clips of one model."""
+    ``qpos[:NQ_ROBOT]``; any further dofs, free objects, are frozen). Reusable across clips of one model."""
 
     def __init__(self, model: mujoco.MjModel, config: FeasibleConfig = FeasibleConfig()):
         if model.body(1).name != "pelvis":

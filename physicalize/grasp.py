@@ -71,8 +71,9 @@ import mujoco
 import numpy as np
 
 from physicalize.target import Target
-from physicalize.wbc import HAND_BODIES, quat_mat
 from pipeline.foot_contact import keep_runs, runs
+from pipeline.robot import HAND_BODIES, NQ_ROBOT
+from pipeline.rotations import quat_mat
 from pipeline.scene import Scene, link_collision_geoms, nearest_geom_pair
 
 GRAVITY = 9.81
@@ -280,7 +281,7 @@ def grasp_schedule(
     reach = max(cfg.max_gap, cfg.clearance)
     fromto = np.zeros(6)
     for t in range(T):
-        d.qpos[:36] = ref.qpos[t]
+        d.qpos[:NQ_ROBOT] = ref.qpos[t]
         for n in names:
             adr = scene.object_qpos_adr[n]
             d.qpos[adr : adr + 7] = objects[n][t]

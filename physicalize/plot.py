@@ -16,7 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from pipeline.figure import save_figure  # noqa: E402
+from pipeline.stage.figure import save_figure  # noqa: E402
 
 
 def plot_physicalized(

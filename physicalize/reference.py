@@ -19,9 +19,9 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from physicalize.target import Target
-from physicalize.wbc import FOOT_BODIES, HAND_BODIES, sole_corners
-from pipeline.clip_dataset import qvel_from_qpos
+from pipeline.dataset.clips import qvel_from_qpos
 from pipeline.foot_contact import keep_runs
+from pipeline.robot import FOOT_BODIES, HAND_BODIES, NQ_ROBOT, NV_ROBOT, sole_corners
 
 STANCE_HEIGHT = 0.03
 STANCE_SPEED = 0.1
@@ -115,7 +115,7 @@ def build_reference(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> Refe
     sole = np.zeros((T, 2, 4, 3))
     hand_pos, torso_quat = np.zeros((T, 2, 3)), np.zeros((T, 4))
     for t in range(T):
-        d.qpos[:36] = qpos[t]
+        d.qpos[:NQ_ROBOT] = qpos[t]
         mujoco.mj_kinematics(model, d)
         mujoco.mj_comPos(model, d)
         com[t] = d.subtree_com[pelvis]
@@ -125,7 +125,7 @@ def build_reference(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> Refe
             sole[t, k] = d.xpos[feet[k]] + corners[k] @ d.xmat[feet[k]].reshape(3, 3).T
             hand_pos[t, k] = d.xpos[hands[k]]
         mujoco.mju_mat2Quat(torso_quat[t], d.xmat[torso])
-    qvel = qvel_from_qpos(qpos, fps) if T > 1 else np.zeros((1, 35))
+    qvel = qvel_from_qpos(qpos, fps) if T > 1 else np.zeros((1, NV_ROBOT))
     qacc = np.gradient(qvel, 1.0 / fps, axis=0) if T > 2 else np.zeros_like(qvel)
     height = sole[..., 2].min(axis=2)
     speed = np.zeros((T, 2))
@@ -149,7 +149,7 @@ def place_on_floor(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
     feet = [model.body(b).id for b in FOOT_BODIES]
     corners = [sole_corners(model, b) for b in FOOT_BODIES]
     for q in qpos:
-        d.qpos[:36] = q
+        d.qpos[:NQ_ROBOT] = q
         mujoco.mj_kinematics(model, d)
         low = min((d.xpos[f] + c @ d.xmat[f].reshape(3, 3).T)[:, 2].min() for f, c in zip(feet, corners))
         q[2] -= low

@@ -51,9 +51,21 @@ from tensordict import TensorDict
 
 from physicalize.reference import Reference
 from physicalize.rollout import SUBSTEPS, fallen
-from physicalize.wbc import FOOT_BODIES, NV_ROBOT, WholeBodyController, quat_mat
+from physicalize.wbc import WholeBodyController
 from pipeline.clip import RobotClip
-from pipeline.robot import NUM_JOINTS
+from pipeline.robot import (
+    FOOT_BODIES,
+    FREE_NQ,
+    JOINTS_QPOS,
+    JOINTS_QVEL,
+    NQ_ROBOT,
+    NUM_JOINTS,
+    NV_ROBOT,
+    ROOT_ANG_VEL,
+    ROOT_POS,
+    ROOT_QUAT,
+)
+from pipeline.rotations import quat_mat
 
 FORMAT = "lessmimic-residual-v1"
 
@@ -106,13 +118,13 @@ def observe(d: mujoco.MjData, ref: Reference, t: int, base_action: np.ndarray, c
     T = ref.frames
     t = min(max(t, 0), T - 1)
     p, R = d.qpos[:3], quat_mat(d.qpos[3:7])
-    q = d.qpos[7 : 7 + NUM_JOINTS]
-    parts = [q, d.qvel[6:NV_ROBOT], R.T @ np.array([0.0, 0.0, -1.0]), d.qvel[3:6], p[2:3], base_action - q]
+    q = d.qpos[JOINTS_QPOS]
+    parts = [q, d.qvel[JOINTS_QVEL], R.T @ np.array([0.0, 0.0, -1.0]), d.qvel[ROOT_ANG_VEL], p[2:3], base_action - q]
     for k in (0, *cfg.lookahead):
         r = ref.qpos[min(t + k, T - 1)]
-        parts += [r[7:], R.T @ (r[:3] - p), _rot6(R.T @ quat_mat(r[3:7]))]
-    if d.qpos.shape[0] >= 43:
-        o = d.qpos[36:43]
+        parts += [r[JOINTS_QPOS], R.T @ (r[ROOT_POS] - p), _rot6(R.T @ quat_mat(r[ROOT_QUAT]))]
+    if d.qpos.shape[0] >= NQ_ROBOT + FREE_NQ:
+        o = d.qpos[NQ_ROBOT : NQ_ROBOT + FREE_NQ]
         parts += [R.T @ (o[:3] - p), _rot6(R.T @ quat_mat(o[3:7])), np.ones(1)]
     else:
         parts.append(np.zeros(10))
@@ -125,7 +137,7 @@ def start_state(scene, ref: Reference, objects: dict[str, np.ndarray], s: int) -
     ``s..s+4`` (as :func:`physicalize.rollout.initial_state` at ``s = 0``), objects at their pose, at rest."""
     m = scene.model
     qpos, qvel = np.zeros(m.nq), np.zeros(m.nv)
-    qpos[:36], qvel[:NV_ROBOT] = ref.qpos[s], np.median(ref.qvel[s : s + 5], axis=0)
+    qpos[:NQ_ROBOT], qvel[:NV_ROBOT] = ref.qpos[s], np.median(ref.qvel[s : s + 5], axis=0)
     for name, adr in scene.object_qpos_adr.items():
         qpos[adr : adr + 7] = objects[name][s]
     return qpos, qvel
@@ -195,13 +207,13 @@ class ResidualEnv(VecEnv):
 
     def _reward(self, d: mujoco.MjData, t: int, a: np.ndarray, a_prev: np.ndarray) -> float:
         cfg, r = self.cfg, self.ref.qpos[t]
-        e_rot = 2.0 * np.arccos(min(1.0, abs(float(np.dot(d.qpos[3:7], r[3:7])))))
+        e_rot = 2.0 * np.arccos(min(1.0, abs(float(np.dot(d.qpos[3:7], r[ROOT_QUAT])))))
         e_feet = np.sqrt(
             sum(float(np.sum((d.xpos[f] - self.ref.foot_pos[t, k]) ** 2)) for k, f in enumerate(self.feet))
         )
         rew = (
-            cfg.w_joint * _kernel(np.linalg.norm(d.qpos[7:36] - r[7:]), cfg.sigma_joint)
-            + cfg.w_root_pos * _kernel(np.linalg.norm(d.qpos[:3] - r[:3]), cfg.sigma_root_pos)
+            cfg.w_joint * _kernel(np.linalg.norm(d.qpos[JOINTS_QPOS] - r[JOINTS_QPOS]), cfg.sigma_joint)
+            + cfg.w_root_pos * _kernel(np.linalg.norm(d.qpos[:3] - r[ROOT_POS]), cfg.sigma_root_pos)
             + cfg.w_root_rot * _kernel(e_rot, cfg.sigma_root_rot)
             + cfg.w_feet * _kernel(e_feet, cfg.sigma_feet)
             + cfg.w_alive

@@ -22,8 +22,9 @@ import numpy as np
 
 from physicalize.reference import Reference
 from physicalize.stepping import foot_floor_forces
-from physicalize.wbc import FOOT_BODIES, NV_ROBOT, WholeBodyController, quat_mat
-from pipeline.robot import NUM_JOINTS
+from physicalize.wbc import WholeBodyController
+from pipeline.robot import FOOT_BODIES, NQ_ROBOT, NUM_JOINTS, NV_ROBOT
+from pipeline.rotations import quat_mat
 from pipeline.scene import Scene, link_collision_geoms
 
 SUBSTEPS = 4
@@ -60,7 +61,7 @@ def initial_state(scene: Scene, ref: Reference, objects: dict[str, np.ndarray]) 
     at their first pose, at rest."""
     m = scene.model
     qpos, qvel = np.zeros(m.nq), np.zeros(m.nv)
-    qpos[:36], qvel[:NV_ROBOT] = ref.qpos[0], np.median(ref.qvel[:5], axis=0)
+    qpos[:NQ_ROBOT], qvel[:NV_ROBOT] = ref.qpos[0], np.median(ref.qvel[:5], axis=0)
     for name, adr in scene.object_qpos_adr.items():
         qpos[adr : adr + 7] = objects[name][0]
     return qpos, qvel

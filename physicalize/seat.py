@@ -29,14 +29,13 @@ import mujoco
 import numpy as np
 
 from pipeline.foot_contact import keep_runs, runs
-from pipeline.robot import NUM_JOINTS
+from pipeline.robot import NQ_ROBOT, NV_ROBOT
 from pipeline.scene import nearest_geom_pair
 
 if TYPE_CHECKING:
     from physicalize.reference import Reference
     from physicalize.wbc import WholeBodyController
 
-NV_ROBOT = 6 + NUM_JOINTS
 SUPPORT_NORMAL_Z = np.cos(np.pi / 4)  # a contact whose normal is this close to vertical supports from below
 SEAT_LINKS = (
     "pelvis",
@@ -106,9 +105,9 @@ def seat_support(
     out = np.full((T, MAX_SEAT_POINTS, 3), np.nan)
     fromto = np.zeros(6)
     for t in np.flatnonzero(seated):
-        d.qpos[:36] = ref.qpos[t]
+        d.qpos[:NQ_ROBOT] = ref.qpos[t]
         if objects_qpos is not None:
-            d.qpos[36:] = objects_qpos[t]
+            d.qpos[NQ_ROBOT:] = objects_qpos[t]
         mujoco.mj_kinematics(model, d)
         for i, geoms in enumerate(links):
             dist, _, _ = nearest_geom_pair(model, d, geoms, objects, cfg.reach, fromto)

@@ -32,6 +32,7 @@ from tqdm import tqdm
 from physicalize.rollout import Rollout
 from pipeline.clip import PhysicalizedClip, RobotClip
 from pipeline.errors import InputError
+from pipeline.robot import FREE_NV, NQ_ROBOT, NV_ROBOT
 
 if TYPE_CHECKING:
     from physicalize.wbc_config import WBCConfig
@@ -122,9 +123,9 @@ def tracking_problem(clip: RobotClip, profile: str = "mjlab", reference: str = "
     ref = build_reference(scene.model, clip.qpos, clip.fps)
     zmp = None
     m = scene.model
-    obj_q = np.repeat(m.qpos0[None, 36:], ref.frames, 0)
+    obj_q = np.repeat(m.qpos0[None, NQ_ROBOT:], ref.frames, 0)
     for o in (o for o in clip.objects if o.name in scene.object_qpos_adr):  # free objects; fixed ones are in the model
-        adr = scene.object_qpos_adr[o.name] - 36
+        adr = scene.object_qpos_adr[o.name] - NQ_ROBOT
         obj_q[:, adr : adr + 7] = o.pose[: ref.frames]
     ref.seat = seat_support(m, ref, clip.contact_links, clip.contacts, obj_q)  # the plan's support includes the seat
     if reference == "planned":
@@ -278,7 +279,7 @@ def physicalize_clip(
         for o in clip.objects
     )
     robot = RobotClip(
-        roll.qpos[:, :36],
+        roll.qpos[:, :NQ_ROBOT],
         clip.fps,
         clip.source,
         objects=sim_objects,
@@ -373,10 +374,12 @@ CARD_NOTES = [
 def _physicalized(r: ClipResult) -> PhysicalizedClip:
     """The clip as the dataset stores it: the simulated motion and what the simulation measured."""
     roll, T = r.rollout, r.robot.frames
-    vel = tuple(roll.qvel[:, 35 + 6 * k : 41 + 6 * k] for k in range(len(r.robot.objects)))
+    vel = tuple(
+        roll.qvel[:, NV_ROBOT + FREE_NV * k : NV_ROBOT + FREE_NV * (k + 1)] for k in range(len(r.robot.objects))
+    )
     return PhysicalizedClip(
         r.robot,
-        roll.qvel[:, :35],
+        roll.qvel[:, :NV_ROBOT],
         vel,
         roll.action,
         roll.torque,
@@ -387,9 +390,9 @@ def _physicalized(r: ClipResult) -> PhysicalizedClip:
 
 
 def run_fingerprint(src: Path, spec: TeacherSpec, profile: str, keep_invalid: bool) -> str:
-    """What a run's output depends on (:mod:`pipeline.stage_state`): the retargeted dataset at ``src``,
+    """What a run's output depends on (:mod:`pipeline.stage.state`): the retargeted dataset at ``src``,
     the teacher (with its checkpoint's digest, not its path), the actuator profile and ``keep_invalid``."""
-    from pipeline.stage_state import dataset_fingerprint, fingerprint
+    from pipeline.stage.state import dataset_fingerprint, fingerprint
 
     return fingerprint(
         stage="physicalized",
@@ -410,14 +413,14 @@ def run_stage(
     and nothing is done."""
     from physicalize.plot import plot_physicalized
     from physicalize.validate import summarise
-    from pipeline.clip_dataset import episodes_to_robot_clips, physicalized_clips_to_episodes
-    from pipeline.dataset import write_dataset
-    from pipeline.dataset_card import DatasetCard
-    from pipeline.dataset_write import check_target
-    from pipeline.ingest import file_stem, stage_dir, write_json_atomic
-    from pipeline.inspect_log import write_robot_log
+    from pipeline.dataset.card import DatasetCard
+    from pipeline.dataset.clips import episodes_to_robot_clips, physicalized_clips_to_episodes
+    from pipeline.dataset.write import check_target, write_dataset
     from pipeline.robot import actuator_profile
-    from pipeline.stage_state import KEY, up_to_date
+    from pipeline.stage.atomic import write_json_atomic
+    from pipeline.stage.inspect_log import write_robot_log
+    from pipeline.stage.paths import file_stem, stage_dir
+    from pipeline.stage.state import KEY, up_to_date
 
     spec = parse_teacher(teacher)
     try:

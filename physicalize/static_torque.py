@@ -21,8 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from physicalize.wbc import HAND_BODIES
-from pipeline.robot import G1_JOINT_NAMES, g1_pinocchio_model, pinocchio_qpos
+from pipeline.robot import G1_JOINT_NAMES, HAND_BODIES, NQ_ROBOT, g1_pinocchio_model, pinocchio_qpos
 
 UPPER_BODY_JOINTS = G1_JOINT_NAMES[G1_JOINT_NAMES.index("waist_yaw_joint") :]
 
@@ -43,7 +42,7 @@ def static_torques(
     dof = [model.joints[model.getJointId(j)].idx_v for j in joints]
     frames = [model.frames[model.getFrameId(b)] for b in HAND_BODIES]
     out = np.zeros((len(qpos), len(joints)))
-    for t, q in enumerate(pinocchio_qpos(np.asarray(qpos)[:, :36])):
+    for t, q in enumerate(pinocchio_qpos(np.asarray(qpos)[:, :NQ_ROBOT])):
         fext = [pin.Force.Zero() for _ in range(model.njoints)]
         if hand_loads is not None and np.any(hand_loads[1][t]):
             pin.forwardKinematics(model, data, q)

@@ -23,8 +23,7 @@ import numpy as np
 
 from physicalize.feasible import feasible_reference
 from physicalize.reference import Reference, build_reference, place_on_floor
-from physicalize.wbc import FOOT_BODIES
-from pipeline.robot import default_qpos
+from pipeline.robot import FOOT_BODIES, NQ_ROBOT, default_qpos
 from pipeline.scene import Scene
 
 FPS = 50.0
@@ -54,7 +53,7 @@ def footstep_gait(
     m = scene.model
     q0 = place_on_floor(m, default_qpos(scene.profile)[None])[0]
     d = mujoco.MjData(m)
-    d.qpos[:36] = q0
+    d.qpos[:NQ_ROBOT] = q0
     mujoco.mj_kinematics(m, d)
     feet = [m.body(b).id for b in FOOT_BODIES]
     start = np.array([d.xpos[f] for f in feet])
@@ -76,14 +75,14 @@ def footstep_gait(
         t += n_swing + n_double
     # IK: feet, pelvis (mid-feet, default height, mean heading), posture
     config = mink.Configuration(m)
-    config.update(np.concatenate([q0, m.qpos0[36:]]))
+    config.update(np.concatenate([q0, m.qpos0[NQ_ROBOT:]]))
     foot_tasks = [mink.FrameTask(b, "body", position_cost=100.0, orientation_cost=30.0) for b in FOOT_BODIES]
     pelvis_task = mink.FrameTask("pelvis", "body", position_cost=10.0, orientation_cost=10.0)
     torso_task = mink.FrameTask("torso_link", "body", position_cost=0.0, orientation_cost=5.0)
     posture = mink.PostureTask(m, cost=0.3)
-    posture.set_target(np.concatenate([q0, m.qpos0[36:]]))
+    posture.set_target(np.concatenate([q0, m.qpos0[NQ_ROBOT:]]))
     limits = [mink.ConfigurationLimit(m)]
-    out = np.zeros((T, 36))
+    out = np.zeros((T, NQ_ROBOT))
     for t in range(T):
         for k in range(2):
             foot_tasks[k].set_target(mink.SE3.from_rotation_and_translation(mink.SO3(_yaw_quat(yaw[t, k])), pos[t, k]))
@@ -98,14 +97,14 @@ def footstep_gait(
                 config, [*foot_tasks, pelvis_task, torso_task, posture], 1.0, "daqp", damping=1e-2, limits=limits
             )
             config.integrate_inplace(dq, 1.0)
-        out[t] = config.q[:36]
+        out[t] = config.q[:NQ_ROBOT]
     return place_on_floor(m, out), pos, yaw
 
 
 def stepping_in_place(scene: Scene, steps: int = 10, **kw) -> tuple[np.ndarray, list]:
     """``(qpos, footsteps)`` of ``steps`` steps on the spot (left foot first)."""
     d = mujoco.MjData(scene.model)
-    d.qpos[:36] = default_qpos(scene.profile)
+    d.qpos[:NQ_ROBOT] = default_qpos(scene.profile)
     mujoco.mj_kinematics(scene.model, d)
     home = [d.xpos[scene.model.body(b).id][:2].copy() for b in FOOT_BODIES]
     footsteps = [(i % 2, home[i % 2], 0.0) for i in range(steps)]
@@ -121,7 +120,7 @@ def walk_with_turn(
     beside the other foot, ``s_{i-1}``), so each foot moves ``2 step_m`` per step (``step_m`` on the
     first); the heading at arc length ``s`` is ``turn_rad s / s_end``, feet ``+-half`` the stance width beside it."""
     d = mujoco.MjData(scene.model)
-    d.qpos[:36] = default_qpos(scene.profile)
+    d.qpos[:NQ_ROBOT] = default_qpos(scene.profile)
     mujoco.mj_kinematics(scene.model, d)
     half = abs(d.xpos[scene.model.body(FOOT_BODIES[0]).id][1] - d.xpos[scene.model.body(FOOT_BODIES[1]).id][1]) / 2
     x0 = d.xpos[scene.model.body(FOOT_BODIES[0]).id][0]

@@ -31,8 +31,7 @@ import mujoco
 import numpy as np
 
 from physicalize.rollout import SUBSTEPS, Rollout
-from physicalize.wbc import FOOT_BODIES
-from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES
+from pipeline.robot import FOOT_BODIES, G1_JOINT_NAMES, G1_LINK_NAMES, JOINTS_QPOS, NQ_ROBOT
 from pipeline.scene import Scene
 
 LOADED_N = 50.0
@@ -97,9 +96,9 @@ def validate(
     fps = 1.0 / (m.opt.timestep * SUBSTEPS)
     q = rollout.qpos
     lo, hi = np.array([m.jnt_range[m.joint(j).id] for j in G1_JOINT_NAMES]).T
-    joints = q[:, 7:36]
+    joints = q[:, JOINTS_QPOS]
     bodies = [m.body(b).id for b in G1_LINK_NAMES]
-    sim_links = _link_positions(m, q[:, :36], bodies)
+    sim_links = _link_positions(m, q[:, :NQ_ROBOT], bodies)
     ref_links = _link_positions(m, ref_qpos[:T], bodies)
     foot_xy = sim_links[:, [G1_LINK_NAMES.index(b) for b in FOOT_BODIES], :2]
     root_err = np.linalg.norm(q[:, :3] - ref_qpos[:T, :3], axis=1)

@@ -46,12 +46,20 @@ from physicalize import seat, wbc_rows
 from physicalize.stepping import Stepping
 from physicalize.target import Solution, Target
 from physicalize.wbc_config import WBCConfig
-from pipeline.robot import G1_JOINT_NAMES, NUM_JOINTS, ActuatorProfile
+from pipeline.robot import (
+    FOOT_BODIES,
+    G1_JOINT_NAMES,
+    HAND_BODIES,
+    JOINTS_QPOS,
+    JOINTS_QVEL,
+    NUM_JOINTS,
+    NV_ROBOT,
+    ActuatorProfile,
+    sole_corners,
+)
+from pipeline.rotations import orientation_error, quat_mat
 from pipeline.scene import link_collision_geoms
 
-NV_ROBOT = 6 + NUM_JOINTS
-FOOT_BODIES = ("left_ankle_roll_link", "right_ankle_roll_link")
-HAND_BODIES = ("left_wrist_yaw_link", "right_wrist_yaw_link")
 GRIP_LINKS = (
     "elbow_link",
     "wrist_roll_link",
@@ -60,52 +68,6 @@ GRIP_LINKS = (
 )  # forearm and hand: a held object's contacts on them are planned
 CONTROL_DT = 0.02
 CLEAR_LINKS = ("hip_roll", "hip_yaw", "knee", "ankle_pitch")  # leg links whose contact with an object is never planned
-
-
-def sole_corners(model: mujoco.MjModel, body: str) -> np.ndarray:
-    """(4, 3) support-polygon corners of a foot in its body frame: the extreme capsule end points
-    of its collision capsules (heel-inner, heel-outer, toe-inner, toe-outer order by x then y) at
-    the sole's lowest point."""
-    bid = model.body(body).id
-    pts, bottom = [], []
-    for g in range(model.ngeom):
-        if (
-            model.geom_bodyid[g] != bid
-            or not model.geom_contype[g]
-            or model.geom_type[g] != mujoco.mjtGeom.mjGEOM_CAPSULE
-        ):
-            continue
-        R = np.empty(9)
-        mujoco.mju_quat2Mat(R, model.geom_quat[g])
-        axis = R.reshape(3, 3)[:, 2] * model.geom_size[g, 1]
-        for s in (-1.0, 1.0):
-            pts.append(model.geom_pos[g] + s * axis)
-        bottom.append(model.geom_pos[g][2] - model.geom_size[g, 0])
-    if not pts:
-        raise ValueError(f"foot body {body!r} has no collision capsules")
-    p = np.array(pts)
-    x0, x1 = p[:, 0].min(), p[:, 0].max()
-    heel, toe = p[np.abs(p[:, 0] - x0) < 0.02], p[np.abs(p[:, 0] - x1) < 0.02]
-    z = min(bottom)
-    return np.array(
-        [[x0, heel[:, 1].min(), z], [x0, heel[:, 1].max(), z], [x1, toe[:, 1].min(), z], [x1, toe[:, 1].max(), z]]
-    )
-
-
-def orientation_error(R_ref: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """World-frame rotation vector ``log(R_ref R^T)`` taking ``R`` to ``R_ref``."""
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, (R_ref @ R.T).ravel())
-    v = np.empty(3)
-    mujoco.mju_quat2Vel(v, q, 1.0)
-    return v
-
-
-def quat_mat(q: np.ndarray) -> np.ndarray:
-    """The rotation matrix (3, 3) of a unit quaternion ``q`` (wxyz)."""
-    R = np.empty(9)
-    mujoco.mju_quat2Mat(R, q)
-    return R.reshape(3, 3)
 
 
 class WholeBodyController:
@@ -278,12 +240,14 @@ class WholeBodyController:
                     if target.hand_object is not None and target.hand_object[k] >= 0:
                         tau_ext = tau_ext - self.external_forces(d, self.grip_geoms[k], int(target.hand_object[k]))
                     tau_ext = tau_ext - Jp.T @ target.hand_force[k]
-        qj, qdj = d.qpos[7 : 7 + NUM_JOINTS], qd[6:]
+        qj, qdj = d.qpos[JOINTS_QPOS], qd[JOINTS_QVEL]
         Jq = np.zeros((NUM_JOINTS, nv))
-        Jq[:, 6:] = np.eye(NUM_JOINTS)
+        Jq[:, JOINTS_QVEL] = np.eye(NUM_JOINTS)
         task(
             Jq,
-            target.qacc[6:] + cfg.posture_kp * (target.qpos[7:] - qj) + cfg.posture_kd * (target.qvel[6:] - qdj),
+            target.qacc[JOINTS_QVEL]
+            + cfg.posture_kp * (target.qpos[JOINTS_QPOS] - qj)
+            + cfg.posture_kd * (target.qvel[JOINTS_QVEL] - qdj),
             cfg.w_posture,
         )
         P[:nv, :nv] += cfg.w_qdd * np.eye(nv)
@@ -332,8 +296,8 @@ class WholeBodyController:
                 Gf[s, nv + 12 * s + 2 : nv + 12 * s + 12 : 3] = -1.0
             G.append(Gf)
             hv.append(np.full(len(stance), -cfg.seated_foot_load * self.robot_mass * 9.81))
-        Tq = np.hstack([M[6:], -Jc[:, 6:].T])  # tau = Tq x + h_a - tau_ext_a
-        ta = h[6:] - tau_ext[6:]
+        Tq = np.hstack([M[JOINTS_QVEL], -Jc[:, JOINTS_QVEL].T])  # tau = Tq x + h_a - tau_ext_a
+        ta = h[JOINTS_QVEL] - tau_ext[JOINTS_QVEL]
         G += [Tq, -Tq]
         hv += [cfg.effort_scale * self.effort - ta, cfg.effort_scale * self.effort + ta]
         G, hv = np.vstack(G), np.concatenate(hv)
@@ -355,7 +319,7 @@ class WholeBodyController:
             x = x[:n]
         if not ok:  # fall back to the posture PD with gravity compensation of the current state
             x = np.zeros(n)
-            x[6:nv] = cfg.posture_kp * (target.qpos[7:] - qj) - cfg.posture_kd * qdj
+            x[JOINTS_QVEL] = cfg.posture_kp * (target.qpos[JOINTS_QPOS] - qj) - cfg.posture_kd * qdj
         qdd, f = x[:nv], x[nv:]
         tau = np.clip(Tq @ x + ta, -self.effort, self.effort)
         return Solution(qdd, f.reshape(-1, 3), tau, self.action(d, qdd, tau), ok)
@@ -366,7 +330,7 @@ class WholeBodyController:
 
     def action(self, d, qdd: np.ndarray, tau: np.ndarray, hold: float = CONTROL_DT) -> np.ndarray:
         """PD joint targets that produce ``tau`` at the predicted mid-hold state."""
-        q, qd, a = d.qpos[7 : 7 + NUM_JOINTS], d.qvel[6:NV_ROBOT], qdd[6:]
+        q, qd, a = d.qpos[JOINTS_QPOS], d.qvel[JOINTS_QVEL], qdd[JOINTS_QVEL]
         qm = q + qd * hold / 2 + a * hold**2 / 8
         qdm = qd + a * hold / 2
         return qm + (tau + self.profile.kd * qdm) / self.profile.kp

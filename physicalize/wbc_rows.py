@@ -12,9 +12,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from pipeline.robot import NUM_JOINTS
-
-NV_ROBOT = 6 + NUM_JOINTS
+from pipeline.robot import JOINTS_QPOS, JOINTS_QVEL, NV_ROBOT
 
 
 def soft_rows(ctrl, d, target, stance: list[int]) -> tuple[np.ndarray, np.ndarray]:
@@ -35,7 +33,7 @@ def soft_rows(ctrl, d, target, stance: list[int]) -> tuple[np.ndarray, np.ndarra
     cfg, nv = ctrl.cfg, NV_ROBOT
     Gs, hs = [], []
     if cfg.joint_limits:
-        qj, qdj = d.qpos[7 : 7 + NUM_JOINTS], d.qvel[6:nv]
+        qj, qdj = d.qpos[JOINTS_QPOS], d.qvel[JOINTS_QVEL]
         b_lo, b_hi = limit_bounds(ctrl, qj, qdj)
         for j in np.flatnonzero(b_lo > -cfg.limit_active):
             g = np.zeros(nv)

@@ -21,11 +21,8 @@ import numpy as np
 
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.geometry import ObjectGeometry, ObjectPhysics
+from pipeline.robot import JOINTS_QPOS, NQ_ROBOT, NUM_JOINTS, NV_ROBOT, ROOT_POSE
 from pipeline.rotations import slerp_wxyz
-
-QPOS_DIM = 36
-QVEL_DIM = 35
-NUM_JOINTS = 29
 
 
 def _check_fps(fps: float, source: str) -> float:
@@ -244,7 +241,7 @@ class RobotClip:
     def __post_init__(self):
         src = self.source
         object.__setattr__(self, "fps", _check_fps(self.fps, src))
-        qpos = check_array(self.qpos, (None, QPOS_DIM), "qpos", src)
+        qpos = check_array(self.qpos, (None, NQ_ROBOT), "qpos", src)
         qpos[:, 3:7] = _normalise_quats(qpos[:, 3:7], "qpos root quaternion", src)
         object.__setattr__(self, "qpos", qpos)
         T = qpos.shape[0]
@@ -270,7 +267,9 @@ class RobotClip:
         if len(t) == 1:
             qpos = np.repeat(self.qpos, len(nt), 0)
         else:
-            qpos = np.concatenate([_resample_pose(t, self.qpos[:, :7], nt), _lerp(t, self.qpos[:, 7:], nt)], axis=1)
+            qpos = np.concatenate(
+                [_resample_pose(t, self.qpos[:, ROOT_POSE], nt), _lerp(t, self.qpos[:, JOINTS_QPOS], nt)], axis=1
+            )
         contacts = None if self.contacts is None else _nearest(t, self.contacts, nt)
         objects = tuple(o.resampled(self.fps, new_fps) for o in self.objects)
         return replace(self, qpos=qpos, contacts=contacts, objects=objects, fps=new_fps)
@@ -306,11 +305,11 @@ class PhysicalizedClip:
     def __post_init__(self):
         src, T = self.robot.source, self.robot.frames
         for name, dim in (
-            ("qvel", QVEL_DIM),
+            ("qvel", NV_ROBOT),
             ("action", NUM_JOINTS),
             ("torque", NUM_JOINTS),
             ("foot_force", 2),
-            ("reference_qpos", QPOS_DIM),
+            ("reference_qpos", NQ_ROBOT),
         ):
             object.__setattr__(self, name, check_array(getattr(self, name), (None, dim), name, src, frames=T))
         vel = tuple(self.object_vel)

@@ -7,9 +7,6 @@ This is the part of the chain every stage shares; the retarget stage starts from
 
 from __future__ import annotations
 
-import json
-import os
-import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,25 +14,11 @@ from pathlib import Path
 from tqdm import tqdm
 
 from pipeline.clip import HumanClip
-from pipeline.dataset import dataset_root
-from pipeline.dataset_write import check_target
+from pipeline.dataset.write import check_target
+from pipeline.stage.atomic import write_json_atomic
+from pipeline.stage.paths import file_stem, stage_dir
 
 HUMAN_FPS = 30
-
-
-def datasets_root() -> Path:
-    """``$LESSMIMIC_DATASETS`` or ``datasets/`` in the working directory."""
-    return Path(os.environ.get("LESSMIMIC_DATASETS", "datasets"))
-
-
-def stage_dir(name: str, stage: str, root: Path | None = None) -> Path:
-    """``<datasets root>/<name>/<stage>``; ``name`` is checked by :func:`pipeline.dataset.validate_name`."""
-    return dataset_root(root or datasets_root(), name) / stage
-
-
-def file_stem(source: str) -> str:
-    """A portable file name stem for a clip source (``synthetic:PickUp`` -> ``synthetic_PickUp``)."""
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(source).stem) or "clip"
 
 
 @dataclass(frozen=True)
@@ -56,13 +39,6 @@ def load_input(input_path: str | None, *, body_model: str | None = None, fps: fl
     return read_clips(Path(input_path), body_model=body_model, fps=fps)
 
 
-def write_json_atomic(path: Path, data: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=str) + "\n")
-    os.replace(tmp, path)
-
-
 def ingest(
     input_path: str | None,
     name: str,
@@ -72,10 +48,10 @@ def ingest(
     root: Path | None = None,
 ) -> IngestResult:
     """Read, validate and resample to :data:`HUMAN_FPS`, write the dataset, reload it with LeRobot."""
-    from pipeline.clip_dataset import human_clips_to_episodes
-    from pipeline.dataset import write_dataset
-    from pipeline.dataset_card import DatasetCard
-    from pipeline.inspect_log import write_human_log
+    from pipeline.dataset.card import DatasetCard
+    from pipeline.dataset.clips import human_clips_to_episodes
+    from pipeline.dataset.write import write_dataset
+    from pipeline.stage.inspect_log import write_human_log
 
     out = stage_dir(name, "human", root)
     check_target(out, overwrite)  # before any work, so the user sees only this line

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
+import mujoco
 import numpy as np
 
 G1_JOINT_NAMES: tuple[str, ...] = (
@@ -66,6 +67,19 @@ G1_JOINT_NAMES: tuple[str, ...] = (
     "right_wrist_yaw_joint",
 )
 NUM_JOINTS = len(G1_JOINT_NAMES)
+
+# --- The state layout (MuJoCo): the robot is a scene's first tree, free objects follow it ------------
+NQ_ROBOT = 7 + NUM_JOINTS  #: 36: root position (3, world), root quaternion wxyz (4), the joints
+NV_ROBOT = 6 + NUM_JOINTS  #: 35: root linear velocity (world), root angular velocity (root frame), the joints
+ROOT_POS = slice(0, 3)  #: in qpos
+ROOT_QUAT = slice(3, 7)  #: in qpos
+ROOT_POSE = slice(0, 7)  #: position and quaternion, in qpos
+JOINTS_QPOS = slice(7, NQ_ROBOT)
+ROOT_LIN_VEL = slice(0, 3)  #: in qvel
+ROOT_ANG_VEL = slice(3, 6)  #: in qvel
+JOINTS_QVEL = slice(6, NV_ROBOT)
+FREE_NQ, FREE_NV = 7, 6  #: a free body's (an object's) qpos (position, quaternion) and qvel (linear, angular) sizes
+
 ROOT_NAMES: tuple[str, ...] = ("root_x", "root_y", "root_z", "root_qw", "root_qx", "root_qy", "root_qz")
 QPOS_NAMES: tuple[str, ...] = ROOT_NAMES + G1_JOINT_NAMES
 
@@ -86,6 +100,8 @@ G1_LINK_NAMES: tuple[str, ...] = (
     "right_elbow_link",
     "right_wrist_yaw_link",
 )
+FOOT_BODIES: tuple[str, str] = ("left_ankle_roll_link", "right_ankle_roll_link")  #: left, right
+HAND_BODIES: tuple[str, str] = ("left_wrist_yaw_link", "right_wrist_yaw_link")  #: left, right
 #: The 7 query bodies of the released LessMimic demo, in its order.
 LESSMIMIC_DEMO_DF_BODIES: tuple[str, ...] = (
     "left_wrist_yaw_link",
@@ -130,6 +146,28 @@ def _motor_of(joint: str) -> str:
     if any(k in joint for k in ("ankle", "waist_roll", "waist_pitch")):
         return "2x5020"
     raise KeyError(joint)
+
+
+#: Rated motor speeds [rad/s] of mjlab's ``g1_constants.py`` (``velocity_limit`` of the
+#: 5020, 7520-14, 7520-22 and 4010 actuators; the ankle and waist roll/pitch 4-bar pairs are
+#: 5020s). Matched by joint-name substring, first match wins.
+MOTOR_SPEED_RADPS: tuple[tuple[tuple[str, ...], float], ...] = (
+    (("elbow", "shoulder", "wrist_roll", "ankle", "waist_roll", "waist_pitch"), 37.0),  # 5020
+    (("hip_pitch", "hip_yaw", "waist_yaw"), 32.0),  # 7520-14
+    (("hip_roll", "knee"), 20.0),  # 7520-22
+    (("wrist_pitch", "wrist_yaw"), 22.0),  # 4010
+)
+
+
+def joint_velocity_limits(factor: float = 1.0) -> dict[str, float]:
+    """``{joint: factor * rated motor speed}`` [rad/s] for the 29 G1 joints (:data:`MOTOR_SPEED_RADPS`)."""
+    out = {}
+    for j in G1_JOINT_NAMES:
+        speed = next((v for keys, v in MOTOR_SPEED_RADPS if any(k in j for k in keys)), None)
+        if speed is None:
+            raise KeyError(f"no motor speed for joint {j}")
+        out[j] = factor * speed
+    return out
 
 
 ARMATURE = np.array([_MOTORS[_motor_of(j)][0] for j in G1_JOINT_NAMES])
@@ -221,8 +259,6 @@ def g1_spec():
     mass and inertia), so dropping them leaves the physics as it was, while compiling no longer
     processes ~197k mesh vertices: 1.4 ms instead of ~0.8 s per compile (and ~3 s for the first in
     a process). The stages simulate, solve IK and draw the robot from its collision primitives."""
-    import mujoco
-
     spec = mujoco.MjSpec.from_file(str(g1_xml_path()))
     for g in list(spec.geoms):
         if g.type == mujoco.mjtGeom.mjGEOM_MESH and g.contype == 0 and g.conaffinity == 0:
@@ -268,3 +304,33 @@ def pinocchio_qpos(qpos: np.ndarray) -> np.ndarray:
     q = np.array(qpos, dtype=np.float64, copy=True)
     q[..., 3:7] = q[..., [4, 5, 6, 3]]
     return q
+
+
+def sole_corners(model: mujoco.MjModel, body: str) -> np.ndarray:
+    """(4, 3) support-polygon corners of a foot in its body frame: the extreme capsule end points
+    of its collision capsules (heel-inner, heel-outer, toe-inner, toe-outer order by x then y) at
+    the sole's lowest point."""
+    bid = model.body(body).id
+    pts, bottom = [], []
+    for g in range(model.ngeom):
+        if (
+            model.geom_bodyid[g] != bid
+            or not model.geom_contype[g]
+            or model.geom_type[g] != mujoco.mjtGeom.mjGEOM_CAPSULE
+        ):
+            continue
+        R = np.empty(9)
+        mujoco.mju_quat2Mat(R, model.geom_quat[g])
+        axis = R.reshape(3, 3)[:, 2] * model.geom_size[g, 1]
+        for s in (-1.0, 1.0):
+            pts.append(model.geom_pos[g] + s * axis)
+        bottom.append(model.geom_pos[g][2] - model.geom_size[g, 0])
+    if not pts:
+        raise ValueError(f"foot body {body!r} has no collision capsules")
+    p = np.array(pts)
+    x0, x1 = p[:, 0].min(), p[:, 0].max()
+    heel, toe = p[np.abs(p[:, 0] - x0) < 0.02], p[np.abs(p[:, 0] - x1) < 0.02]
+    z = min(bottom)
+    return np.array(
+        [[x0, heel[:, 1].min(), z], [x0, heel[:, 1].max(), z], [x1, toe[:, 1].min(), z], [x1, toe[:, 1].max(), z]]
+    )

@@ -1,11 +1,13 @@
 """Quaternion helpers. The project's convention is MuJoCo's: scalar first, ``wxyz``.
 
-scipy's ``Rotation`` uses scalar-last ``xyzw``; these two functions are the only
-places the order is switched.
+scipy's ``Rotation`` uses scalar-last ``xyzw``; :func:`xyzw_to_wxyz` and :func:`wxyz_to_xyzw` are
+the only places the order is switched. :func:`quat_mat` and :func:`orientation_error` use MuJoCo's own
+conversions (the controllers call them every step).
 """
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -37,3 +39,19 @@ def slerp_wxyz(times: np.ndarray, q: np.ndarray, new_times: np.ndarray) -> np.nd
 
 # Rotation taking a y-up frame to a z-up one: +90 deg about x (y -> z, z -> -y).
 Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+def orientation_error(R_ref: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """World-frame rotation vector ``log(R_ref R^T)`` taking ``R`` to ``R_ref``."""
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, (R_ref @ R.T).ravel())
+    v = np.empty(3)
+    mujoco.mju_quat2Vel(v, q, 1.0)
+    return v
+
+
+def quat_mat(q: np.ndarray) -> np.ndarray:
+    """The rotation matrix (3, 3) of a unit quaternion ``q`` (wxyz)."""
+    R = np.empty(9)
+    mujoco.mju_quat2Mat(R, q)
+    return R.reshape(3, 3)

@@ -282,3 +282,26 @@ def nearest_geom_pair(
                 if fromto is not None:
                     fromto[:] = points
     return best, *pair
+
+
+def robot_collision_geoms(model: mujoco.MjModel) -> list[int]:
+    """Collision geoms (``contype`` != 0) of the robot tree rooted at ``pelvis``."""
+    root = model.body("pelvis").id
+    return [g for g in range(model.ngeom) if model.geom_contype[g] and model.body_rootid[model.geom_bodyid[g]] == root]
+
+
+def object_collision_geoms(model: mujoco.MjModel, scene: Scene) -> list[int]:
+    """Collision geoms of every scene object (``<object>_col<k>``, chair parts, ...)."""
+    ids = {model.body(o.name).id for o in scene.objects}
+    return [g for g in range(model.ngeom) if model.geom_contype[g] and model.geom_bodyid[g] in ids]
+
+
+def self_collision_groups(model: mujoco.MjModel) -> list[tuple[list[int], list[int]]]:
+    """Robot geom groups checked against each other: every robot collision geom against every other.
+
+    :class:`pipeline.ik_limits.SeparationLimit` then drops what MuJoCo's physics drops (``<exclude>``
+    pairs, geoms of one weld, parent-child bodies), so the IK avoids exactly the self-contacts
+    the physics stage would see.
+    """
+    geoms = robot_collision_geoms(model)
+    return [(geoms, geoms)]

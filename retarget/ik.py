@@ -48,19 +48,10 @@ import numpy as np
 
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.ik_limits import FloorLimit, FrameVelocityLimit, SeparationLimit
-from pipeline.robot import default_qpos
-from pipeline.scene import Scene
+from pipeline.robot import FOOT_BODIES, NQ_ROBOT, default_qpos, joint_velocity_limits
+from pipeline.scene import Scene, object_collision_geoms, robot_collision_geoms, self_collision_groups
 from retarget.contact import ContactTask, FootClearance, contact_ramp, hold_resting
-from retarget.ik_config import (
-    FOOT_BODIES,
-    IKConfig,
-    ik_model,
-    joint_velocity_limits,
-    object_collision_geoms,
-    robot_collision_geoms,
-    self_collision_groups,
-    sole_offset,
-)
+from retarget.ik_config import IKConfig, ik_model, sole_offset
 from retarget.targets import IKTargets
 
 
@@ -411,7 +402,7 @@ def targets_from_qpos(
     T, K = qpos.shape[0], len(ids)
     pos, quat = np.empty((T, K, 3)), np.empty((T, K, 4))
     for t in range(T):
-        data.qpos[:36] = qpos[t]
+        data.qpos[:NQ_ROBOT] = qpos[t]
         mujoco.mj_kinematics(model, data)
         pos[t], quat[t] = data.xpos[ids], data.xquat[ids]
     return IKTargets(

@@ -17,21 +17,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from pipeline.robot import G1_JOINT_NAMES
+from pipeline.robot import NQ_ROBOT
 from pipeline.scene import Scene
-
-#: Foot bodies (left, right), pinned while ``IKTargets.foot_contact`` is set.
-FOOT_BODIES: tuple[str, str] = ("left_ankle_roll_link", "right_ankle_roll_link")
-
-#: Rated motor speeds [rad/s] of mjlab's ``g1_constants.py`` (``velocity_limit`` of the
-#: 5020, 7520-14, 7520-22 and 4010 actuators; the ankle and waist roll/pitch 4-bar pairs are
-#: 5020s). Matched by joint-name substring, first match wins.
-MOTOR_SPEED_RADPS: tuple[tuple[tuple[str, ...], float], ...] = (
-    (("elbow", "shoulder", "wrist_roll", "ankle", "waist_roll", "waist_pitch"), 37.0),  # 5020
-    (("hip_pitch", "hip_yaw", "waist_yaw"), 32.0),  # 7520-14
-    (("hip_roll", "knee"), 20.0),  # 7520-22
-    (("wrist_pitch", "wrist_yaw"), 22.0),  # 4010
-)
 
 
 @dataclass
@@ -125,17 +112,6 @@ class IKConfig:
             raise ValueError("IKConfig: damping and posture_cost must be >= 0")
 
 
-def joint_velocity_limits(factor: float = 1.0) -> dict[str, float]:
-    """``{joint: factor * rated motor speed}`` [rad/s] for the 29 G1 joints (:data:`MOTOR_SPEED_RADPS`)."""
-    out = {}
-    for j in G1_JOINT_NAMES:
-        speed = next((v for keys, v in MOTOR_SPEED_RADPS if any(k in j for k in keys)), None)
-        if speed is None:
-            raise KeyError(f"no motor speed for joint {j}")
-        out[j] = factor * speed
-    return out
-
-
 def ik_model(scene: Scene) -> mujoco.MjModel:
     """The scene's model with each free object made a mocap body (its free joint removed).
 
@@ -152,7 +128,7 @@ def ik_model(scene: Scene) -> mujoco.MjModel:
             spec.delete(j)
         body.mocap = True
     model = spec.compile()
-    if model.nq != 36:
+    if model.nq != NQ_ROBOT:
         raise RuntimeError(f"IK model has nq {model.nq}; expected the G1's 36 after freezing the objects")
     return model
 
@@ -188,26 +164,3 @@ def sole_offset(model: mujoco.MjModel, body: str) -> float:
     if not geoms:
         raise ValueError(f"body {body} has no collision geoms to define a sole")
     return -min(_lowest_z(model, g) for g in geoms)
-
-
-def robot_collision_geoms(model: mujoco.MjModel) -> list[int]:
-    """Collision geoms (``contype`` != 0) of the robot tree rooted at ``pelvis``."""
-    root = model.body("pelvis").id
-    return [g for g in range(model.ngeom) if model.geom_contype[g] and model.body_rootid[model.geom_bodyid[g]] == root]
-
-
-def object_collision_geoms(model: mujoco.MjModel, scene: Scene) -> list[int]:
-    """Collision geoms of every scene object (``<object>_col<k>``, chair parts, ...)."""
-    ids = {model.body(o.name).id for o in scene.objects}
-    return [g for g in range(model.ngeom) if model.geom_contype[g] and model.geom_bodyid[g] in ids]
-
-
-def self_collision_groups(model: mujoco.MjModel) -> list[tuple[list[int], list[int]]]:
-    """Robot geom groups checked against each other: every robot collision geom against every other.
-
-    :class:`pipeline.ik_limits.SeparationLimit` then drops what MuJoCo's physics drops (``<exclude>``
-    pairs, geoms of one weld, parent-child bodies), so the IK avoids exactly the self-contacts
-    the physics stage would see.
-    """
-    geoms = robot_collision_geoms(model)
-    return [(geoms, geoms)]

@@ -22,9 +22,10 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from pipeline.clip import HumanClip, RobotClip  # noqa: E402
-from pipeline.figure import save_figure  # noqa: E402
 from pipeline.foot_contact import detect_foot_contacts  # noqa: E402
-from pipeline.metrics import scene_for  # noqa: E402
+from pipeline.robot import JOINTS_QPOS, NQ_ROBOT
+from pipeline.stage.figure import save_figure  # noqa: E402
+from retarget.metrics import scene_for  # noqa: E402
 
 DIST_CAP = 0.5
 SIDES = ("left", "right")
@@ -51,7 +52,7 @@ def clip_series(robot: RobotClip) -> dict[str, np.ndarray]:
     foot_z, hand_d = np.zeros((T, 2)), np.full((T, 2), np.nan)
     fromto = np.zeros(6)
     for t in range(T):
-        d.qpos[:36] = robot.qpos[t]
+        d.qpos[:NQ_ROBOT] = robot.qpos[t]
         for o in robot.objects:
             a = scene.object_qpos_adr[o.name]
             d.qpos[a : a + 7] = o.pose[t]
@@ -59,7 +60,7 @@ def clip_series(robot: RobotClip) -> dict[str, np.ndarray]:
         foot_z[t] = d.site_xpos[feet, 2]
         if obj_geoms:
             hand_d[t] = [min(mujoco.mj_geomDistance(m, d, h, g, DIST_CAP, fromto) for g in obj_geoms) for h in hands]
-    speed = np.abs(np.diff(robot.qpos[:, 7:], axis=0)).max(axis=1) * robot.fps
+    speed = np.abs(np.diff(robot.qpos[:, JOINTS_QPOS], axis=0)).max(axis=1) * robot.fps
     return {"foot_z": foot_z, "hand_dist": hand_d, "joint_speed": np.r_[speed, speed[-1:]]}
 
 

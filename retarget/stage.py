@@ -6,7 +6,7 @@ Per clip (independent, so a process pool runs them): resample the human clip to 
 rate (:data:`FPS`), pick its mapping, compute the scale, build :class:`IKTargets`, map the
 objects into the robot's world, solve the IK in a scene built with the same collision model
 as the physics, label per-link contacts from the human's, and measure
-:func:`pipeline.metrics.retarget_metrics`. A finished clip is cached in
+:func:`retarget.metrics.retarget_metrics`. A finished clip is cached in
 ``datasets/<NAME>/.work/retarget/`` (keyed by the clip's data and index), so a re-run after an
 interruption resumes where it stopped (``--overwrite`` starts afresh; a finished stage removes
 the cache); a failing clip is reported with its one-line error and the others go on. A rerun on
@@ -48,7 +48,7 @@ class ClipResult:
 
 
 def _link_map(clip: HumanClip, mapping) -> dict[str, str]:
-    from pipeline.metrics import DEFAULT_LINK_MAP
+    from retarget.metrics import DEFAULT_LINK_MAP
 
     names = set(clip.skeleton.joint_names)
     return {
@@ -61,10 +61,10 @@ def retarget_clip(
     clip: HumanClip, *, height_override: float | None = None, mapping_name: str | None = None
 ) -> tuple[RobotClip, dict, dict]:
     """(robot clip, metrics, scale summary) for one human clip."""
-    from pipeline.metrics import retarget_metrics
     from retarget.contact import link_contact_flags
     from retarget.ik import G1Retargeter
     from retarget.mapping import load_mapping
+    from retarget.metrics import retarget_metrics
     from retarget.objects import map_objects
     from retarget.scaling import compute_scale, human_to_targets
 
@@ -176,11 +176,11 @@ def _feature_frames(features) -> dict[str, str]:
 def input_fingerprint(
     input_path: str | None, *, body_model: str | None = None, height_override: float | None = None
 ) -> str:
-    """What a run's output depends on (:mod:`pipeline.stage_state`): every input file's path, size and
+    """What a run's output depends on (:mod:`pipeline.stage.state`): every input file's path, size and
     mtime (the embedded default: its generator's source code), the body model's, and the height
     override; not ``jobs``, which changes only the speed."""
     from pipeline import default_input, synthetic
-    from pipeline.stage_state import files_fingerprint, fingerprint
+    from pipeline.stage.state import files_fingerprint, fingerprint
 
     if input_path is None:
         generator = [Path(default_input.__file__), *sorted(Path(synthetic.__file__).parent.glob("*.py"))]
@@ -205,14 +205,15 @@ def run_stage(
     """``lessmimic retarget``: ingest, retarget every clip, write the dataset, report and logs. Without
     ``overwrite``, an existing dataset whose report records this run's :func:`input_fingerprint` is up
     to date: its report comes back with ``"up_to_date": True`` and nothing is done."""
-    from pipeline.clip_dataset import robot_clips_to_episodes
-    from pipeline.dataset import write_dataset
-    from pipeline.dataset_card import DatasetCard
-    from pipeline.dataset_write import check_target
-    from pipeline.ingest import file_stem, ingest, stage_dir, write_json_atomic
-    from pipeline.inspect_log import write_robot_log
-    from pipeline.metrics import summarise
-    from pipeline.stage_state import KEY, up_to_date
+    from pipeline.dataset.card import DatasetCard
+    from pipeline.dataset.clips import robot_clips_to_episodes
+    from pipeline.dataset.write import check_target, write_dataset
+    from pipeline.ingest import ingest
+    from pipeline.stage.atomic import write_json_atomic
+    from pipeline.stage.inspect_log import write_robot_log
+    from pipeline.stage.paths import file_stem, stage_dir
+    from pipeline.stage.state import KEY, up_to_date
+    from retarget.metrics import summarise
     from retarget.plot import plot_clip
 
     out = stage_dir(name, "retargeted")

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 
-from pipeline.cli import main
+from lessmimic.cli import main
 
 
 def test_help_lists_every_command():
     out = subprocess.run(
-        [sys.executable, "-m", "pipeline.cli", "--help"], capture_output=True, text=True, check=True
+        [sys.executable, "-m", "lessmimic.cli", "--help"], capture_output=True, text=True, check=True
     ).stdout
     for cmd in ("retarget", "physicalize", "features", "inspect", "load", "publish", "merge"):
         assert cmd in out

@@ -5,7 +5,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pipeline.clip import HumanClip, ObjectTrack, PhysicalizedClip, RobotClip, Skeleton
-from pipeline.clip_dataset import (
+from pipeline.dataset import write_dataset
+from pipeline.dataset.clips import (
     clips_fps,
     episodes_to_human_clips,
     episodes_to_physicalized_clips,
@@ -16,7 +17,6 @@ from pipeline.clip_dataset import (
     qvel_from_qpos,
     robot_clips_to_episodes,
 )
-from pipeline.dataset import write_dataset
 from pipeline.errors import InputError
 from pipeline.geometry import Chair, Primitive
 from pipeline.robot import QPOS_NAMES

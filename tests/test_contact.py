@@ -10,9 +10,8 @@ import pytest
 from pipeline.default_input import default_clips
 from pipeline.geometry import Primitive
 from pipeline.robot import default_qpos
-from pipeline.scene import SceneObject, build_scene, link_collision_geoms
+from pipeline.scene import SceneObject, build_scene, link_collision_geoms, object_collision_geoms
 from retarget.contact import ContactTask, contact_ramp, hold_resting, link_contact_flags
-from retarget.ik_config import object_collision_geoms
 
 WRIST = "right_wrist_yaw_link"
 

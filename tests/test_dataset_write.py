@@ -11,8 +11,8 @@ import pytest
 import torch
 
 from pipeline.dataset import Episode, Feature, merge_datasets, read_episode_meta, write_dataset
-from pipeline.dataset_card import DatasetCard
-from pipeline.dataset_write import CODEBASE_VERSION, INDEX_COLUMNS, QUANTILES
+from pipeline.dataset.card import DatasetCard
+from pipeline.dataset.write import CODEBASE_VERSION, INDEX_COLUMNS, QUANTILES
 from pipeline.errors import InputError
 
 LeRobotDataset = pytest.importorskip("lerobot.datasets.lerobot_dataset").LeRobotDataset

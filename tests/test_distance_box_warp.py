@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from fused_poses import check_pose_per_frame
 
-from pipeline.distance_field import ObjectField
-from pipeline.distance_primitive import _box_phi, chair_shape, primitive_shape
+from pipeline.distance.field import ObjectField
+from pipeline.distance.primitive import _box_phi, chair_shape, primitive_shape
 from pipeline.geometry import Chair, Primitive
 
 BOXES = [

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.distance_ellipsoid import Ellipsoid
+from pipeline.distance.ellipsoid import Ellipsoid
 
 
 def test_ellipse_closest_point_matches_dense_sampling():

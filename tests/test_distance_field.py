@@ -7,7 +7,7 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from pipeline.distance_field import ObjectField, ObjectFields
+from pipeline.distance.field import ObjectField, ObjectFields
 from pipeline.errors import InputError
 from pipeline.geometry import Chair, Primitive, geometry_to_dict
 

@@ -12,12 +12,12 @@ import trimesh
 from mocap_paths import SHARED_MOCAP, needs_shared
 from scipy.spatial.transform import Rotation
 
-from pipeline.distance_field import ObjectField
-from pipeline.distance_mesh import BOX_MARGIN, MeshShape
-from pipeline.distance_octree import OctreeSpec
+from pipeline.distance.field import ObjectField
+from pipeline.distance.mesh import BOX_MARGIN, MeshShape
+from pipeline.distance.octree import OctreeSpec
+from pipeline.distance.warp_runtime import warp
 from pipeline.errors import InputError
 from pipeline.geometry import MeshGeometry
-from pipeline.warp_runtime import warp
 
 RNG = np.random.default_rng(5)
 SMALL = OctreeSpec(margin=0.15, root=0.1, depth=4, tol_near=2e-3, tol_far=1e-2)  # builds in ~2 s

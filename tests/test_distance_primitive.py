@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.distance_primitive import EPS, primitive_shape
+from pipeline.distance.primitive import EPS, primitive_shape
 from pipeline.geometry import Primitive
 
 RNG = np.random.default_rng(7)

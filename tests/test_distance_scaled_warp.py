@@ -7,7 +7,7 @@ import pytest
 import torch
 from fused_poses import check_pose_per_frame
 
-from pipeline.distance_primitive import primitive_shape
+from pipeline.distance.primitive import primitive_shape
 from pipeline.geometry import Primitive
 
 SCALED = [
@@ -78,7 +78,7 @@ def test_no_points():
 @pytest.mark.parametrize("prim", SCALED, ids=lambda p: f"{p.kind}{p.scale}")
 def test_pose_fused_kernel_equals_the_numpy_pose_transform(prim):
     """One numpy pose runs the pose in the kernel; a per-point pose (N, 7) transforms in numpy."""
-    from pipeline.distance_field import ObjectField
+    from pipeline.distance.field import ObjectField
 
     field = ObjectField.from_geometry(prim)
     rng = np.random.default_rng(11)
@@ -98,7 +98,7 @@ def test_pose_fused_kernel_equals_the_numpy_pose_transform(prim):
 @pytest.mark.parametrize("prim", SCALED, ids=lambda p: f"{p.kind}{p.scale}")
 def test_pose_per_frame_fused_kernel_equals_the_numpy_pose_transform(prim):
     """Links over frames (a pose per frame) run the poses in the kernel; per-point poses transform in numpy."""
-    from pipeline.distance_field import ObjectField
+    from pipeline.distance.field import ObjectField
 
     field = ObjectField.from_geometry(prim)
     rng = np.random.default_rng(12)

@@ -7,9 +7,8 @@ import pytest
 from physicalize.feasible import FeasibleConfig, ReferenceIK, feasible_reference, foot_targets, resolve_reference
 from physicalize.plan import plan_com
 from physicalize.reference import build_reference, place_on_floor
-from physicalize.wbc import sole_corners
 from pipeline.geometry import Primitive
-from pipeline.robot import default_qpos
+from pipeline.robot import default_qpos, sole_corners
 from pipeline.scene import SceneObject, build_scene
 
 FPS = 50.0

@@ -5,14 +5,14 @@ import json
 import numpy as np
 import pytest
 
-from pipeline.cli import main
+from lessmimic.cli import main
 from pipeline.clip import ObjectTrack, PhysicalizedClip, RobotClip
-from pipeline.clip_dataset import physicalized_clips_to_episodes
 from pipeline.dataset import write_dataset
+from pipeline.dataset.clips import physicalized_clips_to_episodes
 from pipeline.geometry import Primitive
-from pipeline.ingest import stage_dir
-from pipeline.link_motion import link_motion
 from pipeline.robot import G1_LINK_NAMES, actuator_profile, default_qpos
+from pipeline.stage.paths import stage_dir
+from pipeline.terms.link_motion import link_motion
 
 LeRobotDataset = pytest.importorskip("lerobot.datasets.lerobot_dataset").LeRobotDataset
 BOX = Primitive("box", (0.15, 0.2, 0.25))
@@ -149,7 +149,7 @@ def test_bad_inputs_are_one_line_errors(tmp_path, monkeypatch, capsys):
 
 def test_nothing_to_do_when_physicalize_kept_no_clip(tmp_path, monkeypatch, capsys):
     """The physicalize stage ran and found no valid clip: features says so and exits 0, writing nothing."""
-    from pipeline.ingest import write_json_atomic
+    from pipeline.stage.atomic import write_json_atomic
 
     monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path))
     write_json_atomic(tmp_path / "feat" / "logs" / "physicalized" / "report.json", {"summary": {"episodes_written": 0}})

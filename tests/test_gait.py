@@ -7,7 +7,8 @@ import pytest
 
 from physicalize.rollout import initial_state, simulate
 from physicalize.synthetic_gait import gait_reference, stepping_in_place, walk_with_turn
-from physicalize.wbc import FOOT_BODIES, WholeBodyController
+from physicalize.wbc import WholeBodyController
+from pipeline.robot import FOOT_BODIES
 from pipeline.scene import build_scene
 
 

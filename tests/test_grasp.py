@@ -21,9 +21,10 @@ from physicalize.grasp import (
 )
 from physicalize.reference import build_reference, place_on_floor
 from physicalize.rollout import initial_state, simulate
-from physicalize.wbc import HAND_BODIES, WholeBodyController, orientation_error
+from physicalize.wbc import WholeBodyController
 from pipeline.geometry import ObjectPhysics, Primitive
-from pipeline.robot import G1_JOINT_NAMES, default_qpos
+from pipeline.robot import G1_JOINT_NAMES, HAND_BODIES, default_qpos
+from pipeline.rotations import orientation_error
 from pipeline.scene import SceneObject, build_scene
 
 BOX_HALF = (0.10, 0.12, 0.08)

@@ -19,9 +19,8 @@ from test_grasp import _arm_ik, _smooth, _track_box
 
 from physicalize.grasp import GraspConfig, grasp_schedule, hand_offsets
 from physicalize.reference import build_reference, place_on_floor
-from physicalize.wbc import HAND_BODIES
 from pipeline.geometry import ObjectPhysics, Primitive
-from pipeline.robot import default_qpos
+from pipeline.robot import HAND_BODIES, default_qpos
 from pipeline.scene import SceneObject, build_scene
 
 HALF = (0.08, 0.12, 0.08)

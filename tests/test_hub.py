@@ -9,9 +9,9 @@ from huggingface_hub import metadata_load
 from huggingface_hub.utils import filter_repo_objects
 
 from pipeline.dataset import Episode, Feature, write_dataset
-from pipeline.dataset_card import DatasetCard
+from pipeline.dataset.card import DatasetCard
+from pipeline.dataset.hub import load, publish
 from pipeline.errors import InputError
-from pipeline.hub import load, publish
 
 pytest.importorskip("lerobot")
 

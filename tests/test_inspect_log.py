@@ -16,12 +16,12 @@ import trimesh
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 
-import pipeline.inspect_log as inspect_log
+import pipeline.stage.inspect_log as inspect_log
 from pipeline.clip import HumanClip, ObjectTrack, RobotClip, Skeleton
 from pipeline.errors import InputError
 from pipeline.geometry import Chair, MeshGeometry, Primitive
-from pipeline.inspect_log import object_frame, write_human_log, write_robot_log
 from pipeline.robot import G1_JOINT_NAMES
+from pipeline.stage.inspect_log import object_frame, write_human_log, write_robot_log
 
 FPS = 30.0
 T = 20

@@ -7,10 +7,10 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from pipeline.distance_field import ObjectField
+from pipeline.distance.field import ObjectField
 from pipeline.geometry import Primitive
-from pipeline.interaction import demo_features, feature_names, interaction_features, surface_point_velocity
 from pipeline.rotations import wxyz_from_rotation
+from pipeline.terms.interaction import demo_features, feature_names, interaction_features, surface_point_velocity
 
 
 def _unit(a):

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from pipeline.errors import InputError
-from pipeline.link_motion import link_motion
 from pipeline.robot import G1_LINK_NAMES, actuator_profile, default_qpos, g1_model
+from pipeline.terms.link_motion import link_motion
 
 
 def _trajectory(T=40, fps=200.0):

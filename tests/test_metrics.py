@@ -14,9 +14,9 @@ from mocap_paths import SHARED_MOCAP, needs_shared
 
 from pipeline.clip import HumanClip, ObjectTrack, RobotClip
 from pipeline.geometry import Primitive
-from pipeline.metrics import METRIC_KEYS, evaluate_file, ground_clearance, retarget_metrics, scene_for, summarise
 from pipeline.robot import G1_JOINT_NAMES, joint_limits
 from pipeline.synthetic.skeleton import SKELETON
+from retarget.metrics import METRIC_KEYS, evaluate_file, ground_clearance, retarget_metrics, scene_for, summarise
 
 FPS = 50.0
 T = 20

@@ -4,8 +4,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.observations import PROPRIO_NAMES, ROOT_COMMAND_NAMES, projected_gravity, proprioception, root_command
 from pipeline.rotations import wxyz_from_rotation
+from pipeline.terms.observations import (
+    PROPRIO_NAMES,
+    ROOT_COMMAND_NAMES,
+    projected_gravity,
+    proprioception,
+    root_command,
+)
 
 
 def _walk(T=150, fps=50.0, yaw_deg=90.0, speed=1.0):

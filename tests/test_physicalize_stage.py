@@ -6,17 +6,17 @@ import numpy as np
 import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 
+from lessmimic.cli import main
 from physicalize.reference import place_on_floor
 from physicalize.stage import NO_RETRY_GRIP_OUT, _run_one, physicalize_clip
 from physicalize.wbc_config import TEACHER_GAINS, WBCConfig
-from pipeline.cli import main
 from pipeline.clip import ObjectTrack, RobotClip
-from pipeline.clip_dataset import robot_clips_to_episodes
 from pipeline.dataset import write_dataset
+from pipeline.dataset.clips import robot_clips_to_episodes
 from pipeline.geometry import Primitive
-from pipeline.ingest import stage_dir
 from pipeline.robot import actuator_profile, default_qpos
 from pipeline.scene import build_scene
+from pipeline.stage.paths import stage_dir
 
 BOX = Primitive("box", (0.15, 0.15, 0.15))
 
@@ -159,7 +159,7 @@ def test_kill_9_mid_run_then_rerun_gives_the_same_dataset(tmp_path):
         root = roots[run] = tmp_path / run
         features, episodes = robot_clips_to_episodes(_clips())
         env = {**os.environ, "LESSMIMIC_DATASETS": str(root), "HF_HUB_OFFLINE": "1"}
-        cmd = [sys.executable, "-m", "pipeline.cli", "physicalize", "--name", "hand", "--keep-invalid"]
+        cmd = [sys.executable, "-m", "lessmimic.cli", "physicalize", "--name", "hand", "--keep-invalid"]
         os.environ["LESSMIMIC_DATASETS"] = str(root)
         try:
             write_dataset(stage_dir("hand", "retargeted"), "lessmimic/hand-retargeted", 50, features, episodes)

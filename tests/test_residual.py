@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 import torch
 
+from lessmimic.cli import main
 from physicalize.reference import place_on_floor
 from physicalize.residual import ResidualConfig, ResidualEnv, ResidualPolicy, observe, train_residual
 from physicalize.rollout import initial_state, replay, simulate
 from physicalize.stage import parse_teacher, physicalize_clip, tracking_problem
 from physicalize.wbc import WholeBodyController
-from pipeline.cli import main
 from pipeline.clip import RobotClip
 from pipeline.errors import InputError
 from pipeline.robot import actuator_profile, default_qpos
@@ -153,9 +153,9 @@ def test_teacher_parsing(tmp_path, checkpoint):
 def test_stage_with_the_residual_teacher(tmp_path, monkeypatch, checkpoint, capsys):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    from pipeline.clip_dataset import robot_clips_to_episodes
     from pipeline.dataset import write_dataset
-    from pipeline.ingest import stage_dir
+    from pipeline.dataset.clips import robot_clips_to_episodes
+    from pipeline.stage.paths import stage_dir
 
     monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path))
     features, episodes = robot_clips_to_episodes([_standing_clip()])
@@ -191,9 +191,9 @@ def test_stage_with_the_residual_teacher(tmp_path, monkeypatch, checkpoint, caps
 
 
 def test_train_on_a_retargeted_episode_from_the_cli(tmp_path, monkeypatch):
-    from pipeline.clip_dataset import robot_clips_to_episodes
     from pipeline.dataset import write_dataset
-    from pipeline.ingest import stage_dir
+    from pipeline.dataset.clips import robot_clips_to_episodes
+    from pipeline.stage.paths import stage_dir
 
     monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path))
     features, episodes = robot_clips_to_episodes([_standing_clip(30)])

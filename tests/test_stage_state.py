@@ -3,9 +3,9 @@
 import json
 import os
 
-from pipeline.clip_dataset import robot_clips_to_episodes
 from pipeline.dataset import write_dataset
-from pipeline.stage_state import KEY, dataset_fingerprint, files_fingerprint, fingerprint, up_to_date, up_to_date_line
+from pipeline.dataset.clips import robot_clips_to_episodes
+from pipeline.stage.state import KEY, dataset_fingerprint, files_fingerprint, fingerprint, up_to_date, up_to_date_line
 
 
 def test_fingerprint_changes_with_an_option_not_with_key_order():

@@ -3,8 +3,7 @@ import numpy as np
 import pytest
 
 from physicalize.static_torque import UPPER_BODY_JOINTS, static_torque_figures, static_torques
-from physicalize.wbc import HAND_BODIES
-from pipeline.robot import G1_JOINT_NAMES, actuator_profile, default_qpos, g1_model
+from pipeline.robot import G1_JOINT_NAMES, HAND_BODIES, actuator_profile, default_qpos, g1_model
 
 
 def _pose(seed: int) -> np.ndarray:

@@ -6,8 +6,9 @@ import pytest
 
 from physicalize.reference import build_reference, place_on_floor
 from physicalize.rollout import initial_state, replay, simulate
-from physicalize.wbc import WholeBodyController, orientation_error, sole_corners
-from pipeline.robot import G1_JOINT_NAMES, default_qpos
+from physicalize.wbc import WholeBodyController
+from pipeline.robot import G1_JOINT_NAMES, default_qpos, sole_corners
+from pipeline.rotations import orientation_error
 from pipeline.scene import build_scene
 
 

@@ -9,7 +9,7 @@ all in the world frame as the paper writes it (:func:`interaction_features`). Th
 variant uses ``v - v_c`` instead of ``v``, with ``v_c`` the velocity of the object's closest
 surface point (:func:`surface_point_velocity`), which is what matters when the object moves with
 the hands (Carry). The interaction window ``I_t = {u_(t-l+1) .. u_t}`` is served by the loaders
-(LeRobot ``delta_timestamps``, :class:`pipeline.dataset_read.WindowDataset`); datasets store u_t.
+(LeRobot ``delta_timestamps``, :class:`pipeline.dataset.read.WindowDataset`); datasets store u_t.
 
 The demo layout (:func:`demo_features`, the LessMimic web demo's input contract): per query body,
 ``min(phi, max_distance)`` and the gradient in the body's own frame, ``R_body^T g`` (4 per body).
@@ -19,8 +19,8 @@ Everything takes numpy arrays or torch tensors alike (RL environments compute th
 
 from __future__ import annotations
 
-from pipeline.array_ns import concat, namespace
-from pipeline.distance_field import rotation_rows
+from pipeline.distance.array_ns import concat, namespace
+from pipeline.distance.field import rotation_rows
 
 DF_PARTS = ("phi", "grad_x", "grad_y", "grad_z", "v_norm_x", "v_norm_y", "v_norm_z", "v_tan_x", "v_tan_y", "v_tan_z")
 DEMO_PARTS = ("phi", "grad_x", "grad_y", "grad_z")

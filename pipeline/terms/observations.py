@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pipeline.robot import G1_JOINT_NAMES
+from pipeline.robot import G1_JOINT_NAMES, JOINTS_QPOS, JOINTS_QVEL, ROOT_ANG_VEL
 from pipeline.rotations import rotation_from_wxyz
 
 PROPRIO_NAMES: tuple[str, ...] = (
@@ -50,7 +50,9 @@ def proprioception(qpos: np.ndarray, qvel: np.ndarray, action: np.ndarray) -> np
     """(T, 93) ``[q, dq, gravity_root, omega_root, a_(t-1)]`` from ``qpos (T, 36)``, MuJoCo ``qvel (T, 35)``
     (its root angular velocity is already in the root frame) and ``action (T, 29)``."""
     last = np.concatenate([np.zeros((1, action.shape[1])), action[:-1]])
-    return np.concatenate([qpos[:, 7:], qvel[:, 6:], projected_gravity(qpos), qvel[:, 3:6], last], axis=1)
+    return np.concatenate(
+        [qpos[:, JOINTS_QPOS], qvel[:, JOINTS_QVEL], projected_gravity(qpos), qvel[:, ROOT_ANG_VEL], last], axis=1
+    )
 
 
 def heading(qpos: np.ndarray) -> Rotation:

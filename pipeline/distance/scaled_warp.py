@@ -1,15 +1,15 @@
 """Fused warp kernels (float64) for the per-axis scaled sphere, cylinder and capsule fields.
 
 Each kernel computes, per point, exactly what the numpy/torch code of
-:mod:`pipeline.distance_primitive` computes (``SphereShape``, ``CylinderShape``, ``CapsuleShape``;
+:mod:`pipeline.distance.primitive` computes (``SphereShape``, ``CylinderShape``, ``CapsuleShape``;
 the formulas are stated there): phi, grad and closest point, with the ellipse/ellipsoid solve of
-:mod:`pipeline.distance_ellipsoid_warp`. Inputs are coordinate columns (numpy, or torch on the
+:mod:`pipeline.distance.ellipsoid_warp`. Inputs are coordinate columns (numpy, or torch on the
 CPU or CUDA); results come back as columns of the same kind (torch: the input's dtype).
 
 The ``*_world`` kernels also take the object poses (R_j, t_j), j < T, for numpy world points
 x (N, 3), N = T K, point i at pose j = i // K (one pose: T = 1; one per frame: K links a frame):
 per point p = R_j^T (x - t_j), the object-frame field, then grad = R_j g and closest = R_j c + t_j
-(as :class:`pipeline.distance_field.ObjectField` does in numpy), so the poses cost no numpy pass
+(as :class:`pipeline.distance.field.ObjectField` does in numpy), so the poses cost no numpy pass
 over the points. They run on the CPU (numpy points), one thread per pose looping over its K points:
 the pose is loaded once and no point pays an index division.
 """
@@ -21,12 +21,12 @@ from functools import lru_cache
 import numpy as np
 import warp as wp
 
-from pipeline import distance_ellipsoid_warp as ell
-from pipeline.array_ns import is_numpy
-from pipeline.distance_ellipsoid import Ellipsoid
-from pipeline.warp_runtime import warp
+from pipeline.distance import ellipsoid_warp as ell
+from pipeline.distance.array_ns import is_numpy
+from pipeline.distance.ellipsoid import Ellipsoid
+from pipeline.distance.warp_runtime import warp
 
-EPS = wp.constant(wp.float64(1e-9))  # pipeline.distance_primitive.EPS
+EPS = wp.constant(wp.float64(1e-9))  # pipeline.distance.primitive.EPS
 
 
 vec7d = wp.types.vector(length=7, dtype=wp.float64)

@@ -7,7 +7,7 @@ phi(p), grad(p) and the closest surface point c(p), and the results go back to t
     phi(x) = phi(p),    grad(x) = R grad(p),    closest(x) = R c(p) + t,
 
 with phi = min_{c in S} |x - c| (unsigned) and grad = (x - c)/phi, or the outward surface normal
-at c on the surface and inside the solid (see :mod:`pipeline.distance_primitive`). Several
+at c on the surface and inside the solid (see :mod:`pipeline.distance.primitive`). Several
 objects: each point takes the nearest object (:class:`ObjectFields`), first object on ties.
 
 Every query runs on numpy arrays or torch tensors (CPU or CUDA), with the same math; inputs are
@@ -24,8 +24,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from pipeline.array_ns import as_float, namespace, to_numpy
-from pipeline.distance_primitive import chair_shape, primitive_shape
+from pipeline.distance.array_ns import as_float, namespace, to_numpy
+from pipeline.distance.primitive import chair_shape, primitive_shape
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.geometry import Chair, MeshGeometry, ObjectGeometry, Primitive, geometry_from_dict
 
@@ -96,7 +96,7 @@ class ObjectField:
     @classmethod
     def from_geometry(cls, geom: ObjectGeometry | dict, name: str = "object", **mesh_options) -> ObjectField:
         """Field of a Primitive, Chair or MeshGeometry (or its :func:`geometry_to_dict` form).
-        ``mesh_options`` go to :class:`pipeline.distance_mesh.MeshShape` (e.g. ``cache=False``)."""
+        ``mesh_options`` go to :class:`pipeline.distance.mesh.MeshShape` (e.g. ``cache=False``)."""
         if isinstance(geom, dict):
             try:
                 geom = geometry_from_dict(geom)
@@ -107,7 +107,7 @@ class ObjectField:
         if isinstance(geom, Chair):
             return cls(chair_shape(geom), name)
         if isinstance(geom, MeshGeometry):
-            from pipeline.distance_mesh import MeshShape
+            from pipeline.distance.mesh import MeshShape
 
             return cls(MeshShape.from_geometry(geom, **mesh_options), name)
         raise InputError(

@@ -1,4 +1,4 @@
-"""The ellipse/ellipsoid closest-point solve of :mod:`pipeline.distance_ellipsoid` as warp functions, in float64.
+"""The ellipse/ellipsoid closest-point solve of :mod:`pipeline.distance.ellipsoid` as warp functions, in float64.
 
 Same math, point by point: with the semi-axes merged into groups of equal length (one radial
 coordinate y_k >= 0 per group, unit factors u_i restoring the axes, p_i = u_i y_group(i)), the
@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from pipeline.distance_ellipsoid import Ellipsoid
+from pipeline.distance.ellipsoid import Ellipsoid
 
 MAX_STEPS = 80
 

@@ -11,7 +11,7 @@ the surface ~5x the cost of the search; far out the search dominates). phi = |p 
     grad = s (p - c) / phi    (inside, the outward direction), or
     grad = the triangle's normal where phi <= EPS_MESH (on the surface).
 
-Cached: :class:`pipeline.distance_octree.CachedField` holds exact samples (sd, u = p - c) on an
+Cached: :class:`pipeline.distance.octree.CachedField` holds exact samples (sd, u = p - c) on an
 adaptive octree; the kernel descends to the leaf and interpolates trilinearly,
 
     phi = |sd~|,  grad = sign(sd~) u~ / |u~|,  closest = p - phi u~ / |u~|,
@@ -39,12 +39,12 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.array_ns import as_float, is_numpy
 from pipeline.collision_mesh import cache_dir, load_mesh
-from pipeline.distance_octree import CachedField, OctreeSpec
+from pipeline.distance.array_ns import as_float, is_numpy
+from pipeline.distance.octree import CachedField, OctreeSpec
+from pipeline.distance.warp_runtime import warp as _warp
 from pipeline.errors import InputError
 from pipeline.geometry import MeshGeometry
-from pipeline.warp_runtime import warp as _warp
 
 EPS_MESH = 1e-6  # m: below this the direction (p - c)/phi is float32 noise; the face normal is used
 # m: the bounds test leaves the winding number to points this near the box, where a sheet in a

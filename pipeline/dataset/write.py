@@ -1,5 +1,5 @@
 """Fast, atomic writer of LeRobot v3.0 datasets (the layout ``lerobot==0.4.4`` writes and loads),
-and merging of shards written by parallel workers. Feature/episode conventions: :mod:`pipeline.dataset`.
+(merging shards: :mod:`pipeline.dataset.merge`). Feature/episode conventions: :mod:`pipeline.dataset.schema`.
 
 On disk (all paths relative to the dataset root)::
 
@@ -8,7 +8,7 @@ On disk (all paths relative to the dataset root)::
     meta/episodes/chunk-000/file-000.parquet  per-episode index ranges, tasks and stats
     meta/lessmimic.json                       feature descriptions/units, the card, repo_id
     meta/lessmimic_episodes.jsonl             per episode: episode_index, task, length + its meta
-    README.md                                 the dataset card (:mod:`pipeline.dataset_card`)
+    README.md                                 the dataset card (:mod:`pipeline.dataset.card`)
 
 Column types, parquet schema metadata, ``info.json`` and the episodes table are LeRobot's own
 (a test compares them with a dataset LeRobot writes). LeRobot ignores the ``lessmimic`` files and
@@ -27,15 +27,15 @@ import json
 import os
 import shutil
 import uuid
-from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import replace
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipeline.dataset import (
+from pipeline.dataset.card import DatasetCard, render_card
+from pipeline.dataset.schema import (
     CODEBASE_VERSION,
     DATA_PATH,
     EPISODES_PATH,
@@ -50,7 +50,6 @@ from pipeline.dataset import (
     validate_name,
     validate_repo_id,
 )
-from pipeline.dataset_card import DatasetCard, render_card
 from pipeline.errors import InputError
 
 _FLUSH_ROWS = 200_000
@@ -394,62 +393,3 @@ def _info(fps, features, robot_type, episodes, frames, tasks, data_file_size_mb,
         "video_path": None,
         "features": feats,
     }
-
-
-# --- merging -------------------------------------------------------------------------------------
-
-
-def _merged_card(roots: Sequence[Path]) -> DatasetCard | None:
-    from pipeline.dataset_read import read_card
-
-    cards = [c for c in (read_card(r) for r in roots) if c is not None]
-    if not cards:
-        return None
-    provenance = list(dict.fromkeys(p for c in cards for p in c.provenance))
-    notes = list(dict.fromkeys(n for c in cards for n in c.notes))
-    return replace(cards[0], provenance=provenance, notes=notes, synthetic=any(c.synthetic for c in cards))
-
-
-def merge_datasets(
-    roots: Sequence[str | Path],
-    out_root: str | Path,
-    repo_id: str,
-    overwrite: bool = False,
-    *,
-    card: DatasetCard | None = None,
-) -> Path:
-    """Concatenate datasets (same fps, robot type and features) into one at ``out_root``.
-
-    Episodes keep their order (shard by shard) and are renumbered; ``index`` is recomputed;
-    tasks are renumbered by first appearance; per-episode provenance is carried over. The card
-    defaults to the first shard's with the shards' provenance and notes combined. Atomic, like
-    :func:`write_dataset`; raises :class:`InputError` naming the first mismatching shard.
-    """
-    from pipeline.dataset_read import iter_episodes, read_features, read_info
-
-    roots = [Path(r) for r in roots]
-    if not roots:
-        raise InputError(str(out_root), "roots", "no datasets to merge")
-    infos = [read_info(r) for r in roots]
-    ref = infos[0]
-    for r, info in zip(roots[1:], infos[1:]):
-        for key in ("fps", "robot_type", "features"):
-            if info[key] != ref[key]:
-                raise InputError(r, key, f"differs from {roots[0]} ({info[key]!r} vs {ref[key]!r}); cannot merge")
-
-    def episodes() -> Iterator[Episode]:
-        for r in roots:  # one shard in memory at a time
-            yield from iter_episodes(r)
-
-    return write_dataset(
-        out_root,
-        repo_id,
-        ref["fps"],
-        read_features(roots[0]),
-        episodes(),
-        robot_type=ref["robot_type"],
-        card=card or _merged_card(roots),
-        overwrite=overwrite,
-        data_file_size_mb=ref.get("data_files_size_in_mb", 100),
-        chunks_size=ref.get("chunks_size", 1000),
-    )

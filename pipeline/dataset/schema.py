@@ -1,4 +1,5 @@
-"""LeRobot v3.0 datasets: the feature spec, episodes, validation, and the public API.
+"""The dataset schema: the feature spec (:class:`Feature`), episodes (:class:`Episode`), their
+validation and conversion, names and the on-disk paths LeRobot v3.0 fixes.
 
 A dataset is a typed feature spec (:class:`Feature`) plus episodes (:class:`Episode`). Conventions:
 
@@ -14,13 +15,6 @@ A dataset is a typed feature spec (:class:`Feature`) plus episodes (:class:`Epis
   tasks are numbered in order of first appearance;
 * an episode's ``meta`` is JSON-able provenance, stored one line per episode in
   ``meta/lessmimic_episodes.jsonl`` beside ``episode_index``, ``task`` and ``length``.
-
-The rest of the API is imported lazily from here (so writing does not import torch):
-
-* :mod:`pipeline.dataset_write` -- :func:`write_dataset` (fast, atomic; on-disk layout there),
-  :func:`merge_datasets`;
-* :mod:`pipeline.dataset_read` -- :func:`iter_episodes`, :func:`read_columns`,
-  :func:`read_features`, :class:`WindowDataset` (training windows straight from parquet).
 """
 
 from __future__ import annotations
@@ -181,30 +175,3 @@ def _json_default(o):
     if isinstance(o, np.generic):
         return o.item()
     raise TypeError(f"{type(o).__name__} is not JSON-serialisable")
-
-
-_LAZY = {
-    "write_dataset": "pipeline.dataset_write",
-    "merge_datasets": "pipeline.dataset_write",
-    "WindowDataset": "pipeline.dataset_read",
-    "iter_episodes": "pipeline.dataset_read",
-    "read_columns": "pipeline.dataset_read",
-    "read_features": "pipeline.dataset_read",
-    "read_info": "pipeline.dataset_read",
-    "read_sidecar": "pipeline.dataset_read",
-    "read_card": "pipeline.dataset_read",
-    "read_episode_meta": "pipeline.dataset_read",
-    "episode_ranges": "pipeline.dataset_read",
-    "DatasetCard": "pipeline.dataset_card",
-}
-
-
-def __getattr__(name: str):
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-__all__ = ["Episode", "Feature", "dataset_root", "validate_episode", "validate_name", "validate_repo_id", *_LAZY]

@@ -67,7 +67,7 @@ import numpy as np
 from pipeline.clip import HumanClip, ObjectTrack, RobotClip
 from pipeline.foot_contact import SIDES, detect_foot_contacts
 from pipeline.geometry import MeshGeometry
-from pipeline.robot import G1_JOINT_NAMES
+from pipeline.robot import FOOT_BODIES, G1_JOINT_NAMES, JOINTS_QPOS, NQ_ROBOT
 from pipeline.scene import Scene, SceneObject, build_scene, link_collision_geoms, nearest_geom_pair
 
 METRIC_KEYS: tuple[str, ...] = (
@@ -94,7 +94,6 @@ CONTACT_TOL = 0.02
 JOINT_LIMIT_TOL = 1e-3
 SELF_COLLISION_TOL = 0.005
 FOOT_SITES = ("left_foot", "right_foot")
-FOOT_BODIES = ("left_ankle_roll_link", "right_ankle_roll_link")
 _LOWER_BODY_ROOTS = ("pelvis",)
 
 
@@ -262,7 +261,7 @@ def _sweep(robot: RobotClip, refs: tuple[np.ndarray, list[str]] | None, need_sup
         refs is not None and (bool(og) or not flags.any()),
     )
     for t in range(T):
-        d.qpos[:36] = robot.qpos[t]
+        d.qpos[:NQ_ROBOT] = robot.qpos[t]
         for a, pose in adr:
             d.qpos[a : a + 7] = pose[t]
         mujoco.mj_kinematics(m, d)
@@ -301,7 +300,7 @@ def foot_slide(sites: np.ndarray, contact: np.ndarray, fps: float) -> tuple[floa
 
 def joint_metrics(qpos: np.ndarray, fps: float, lower: np.ndarray, upper: np.ndarray) -> tuple[float, float]:
     """(frac of frames with a joint beyond its range by > 1e-3 rad, max |dq/dt| by forward differences)."""
-    q = qpos[:, 7:]
+    q = qpos[:, JOINTS_QPOS]
     out = ((q < lower - JOINT_LIMIT_TOL) | (q > upper + JOINT_LIMIT_TOL)).any(axis=1)
     speed = _max(np.abs(np.diff(q, axis=0))) * fps
     return _frac(out), speed

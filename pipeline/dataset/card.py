@@ -4,7 +4,7 @@ The README starts with the YAML front matter the Hugging Face hub reads (``licen
 starting with ``LeRobot``, ``task_categories: [robotics]``, and the ``configs`` entry pointing the
 dataset viewer at ``data/*/*.parquet``, as LeRobot's own card does), followed by a description,
 the provenance, the robot and actuator profile, and one table row per feature (meaning, unit,
-frame). :func:`pipeline.dataset_write.write_dataset` writes it; the card's fields are also kept
+frame). :func:`pipeline.dataset.write.write_dataset` writes it; the card's fields are also kept
 in ``meta/lessmimic.json`` so merged datasets can re-render it.
 """
 
@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from pipeline.dataset_write import Feature
+    from pipeline.dataset.schema import Feature
 
 BASE_TAGS = ("LeRobot", "unitree-g1", "humanoid", "motion-retargeting", "human-object-interaction")
 

@@ -1,6 +1,6 @@
 """Fused warp kernels (float64, CPU) for the box and for a union of boxes (the chair), with the pose.
 
-Per point, exactly what :class:`pipeline.distance_primitive.BoxShape` and ``ChairShape`` compute
+Per point, exactly what :class:`pipeline.distance.primitive.BoxShape` and ``ChairShape`` compute
 in numpy (the formulas are stated there), in the same operations and order:
 
 * box with half-extents h at p: c = clip(p, -h, h), phi = |p - c| and grad = (p - c)/phi outside;
@@ -9,7 +9,7 @@ in numpy (the formulas are stated there), in the same operations and order:
 * union of boxes (half-extents h_k, centres o_k): the part with the least box phi (``|q+|`` outside,
   ``-max q`` inside), the first on ties, then the full box field of that part at p - o_k, c + o_k.
 
-Poses as in :mod:`pipeline.distance_scaled_warp` (``*_world`` kernels): world points x (N, 3),
+Poses as in :mod:`pipeline.distance.scaled_warp` (``*_world`` kernels): world points x (N, 3),
 N = T K, at poses (R_j, t_j), point i at pose i // K; p = R_j^T (x - t_j), then grad = R_j g and
 closest = R_j c + t_j. One thread per pose looping over its K points.
 """
@@ -21,9 +21,9 @@ from functools import lru_cache
 import numpy as np
 import warp as wp
 
-from pipeline.distance_ellipsoid_warp import sign
-from pipeline.distance_scaled_warp import EPS, _launch_world, _local, _pack, _write_world, vec7d
-from pipeline.warp_runtime import warp
+from pipeline.distance.ellipsoid_warp import sign
+from pipeline.distance.scaled_warp import EPS, _launch_world, _local, _pack, _write_world, vec7d
+from pipeline.distance.warp_runtime import warp
 
 _F64 = wp.array(dtype=wp.float64)
 _V3 = wp.array(dtype=wp.vec3d)

@@ -24,7 +24,7 @@ Grad is not a refinement criterion by default: it jumps across medial surfaces (
 parts, in concave corners), which no finite cell resolves; near them it is a blend of the two
 sides. ``tol_grad`` adds one outside the solid: on the 50k-face table, 0.2 took the outside grad
 error p99 from 0.42 to 0.05 (bounds + 1 m) at 6x the build time (238 s) and 4.5x the size (321 MB).
-The query runs in a warp kernel (:mod:`pipeline.distance_mesh`).
+The query runs in a warp kernel (:mod:`pipeline.distance.mesh`).
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ demonstrations) and write ``datasets/<NAME>/<stage>/``, a LeRobot v3.0 dataset r
 with a ``report.json``; inspection logs go to ``datasets/<NAME>/logs/<stage>/``.
 Bad input stops with one line ``error: <file>: frame <k>: <field>: <problem>`` and exit
 status 2, leaving no partial output. A rerun on the same input with the same options finds
-its output up to date and does nothing (:mod:`pipeline.stage_state`); other input or options
+its output up to date and does nothing (:mod:`pipeline.stage.state`); other input or options
 over an existing output need ``--overwrite``.
 """
 
@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from pipeline.errors import InputError
-from pipeline.stage_state import up_to_date_line
+from pipeline.stage.state import up_to_date_line
 
 
 def _stage_args(p: argparse.ArgumentParser) -> None:
@@ -83,8 +83,8 @@ def _cmd_physicalize(a: argparse.Namespace) -> int:
 
 def _cmd_physicalize_residual(a: argparse.Namespace) -> int:
     from physicalize.residual import ResidualConfig, train_residual
-    from pipeline.clip_dataset import episodes_to_robot_clips
-    from pipeline.ingest import stage_dir
+    from pipeline.dataset.clips import episodes_to_robot_clips
+    from pipeline.stage.paths import stage_dir
 
     src = stage_dir(a.name, "retargeted")
     if not (src / "meta" / "info.json").is_file():
@@ -122,8 +122,8 @@ def _cmd_features(a: argparse.Namespace) -> int:
 
 
 def _cmd_inspect(a: argparse.Namespace) -> int:
-    from pipeline.inspect_log import write_human_log, write_robot_log
     from pipeline.readers import read_clips, read_robot_clip
+    from pipeline.stage.inspect_log import write_human_log, write_robot_log
 
     src = Path(a.file)
     out = Path(a.out)
@@ -142,8 +142,8 @@ def _cmd_inspect(a: argparse.Namespace) -> int:
 def _cmd_evaluate_retarget(a: argparse.Namespace) -> int:
     import json
 
-    from pipeline.ingest import write_json_atomic
-    from pipeline.metrics import evaluate_file
+    from pipeline.stage.atomic import write_json_atomic
+    from retarget.metrics import evaluate_file
 
     metrics = evaluate_file(a.file, human_path=a.human, object_mesh=a.object_mesh)
     text = json.dumps({"file": str(a.file), **metrics}, indent=2, default=float)
@@ -154,7 +154,7 @@ def _cmd_evaluate_retarget(a: argparse.Namespace) -> int:
 
 
 def _cmd_load(a: argparse.Namespace) -> int:
-    from pipeline.hub import load
+    from pipeline.dataset.hub import load
 
     ds = load(a.dataset)
     print(f"{ds.repo_id}: {ds.num_episodes} episodes, {ds.num_frames} frames at {ds.fps} fps")
@@ -164,14 +164,14 @@ def _cmd_load(a: argparse.Namespace) -> int:
 
 
 def _cmd_publish(a: argparse.Namespace) -> int:
-    from pipeline.hub import publish
+    from pipeline.dataset.hub import publish
 
     print(publish(Path(a.dataset), a.repo_id, private=a.private))
     return 0
 
 
 def _cmd_merge(a: argparse.Namespace) -> int:
-    from pipeline.dataset import merge_datasets
+    from pipeline.dataset.merge import merge_datasets
 
     print(merge_datasets([Path(r) for r in a.shards], Path(a.out), a.repo_id, overwrite=a.overwrite))
     return 0

@@ -13,8 +13,8 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
-from pipeline.dataset import CODEBASE_VERSION, validate_repo_id
-from pipeline.dataset_read import read_info, read_sidecar
+from pipeline.dataset.read import read_info, read_sidecar
+from pipeline.dataset.schema import CODEBASE_VERSION, validate_repo_id
 from pipeline.errors import InputError
 
 #: Never uploaded: LeRobot's temporary images, and hidden files (e.g. the ``.cache`` that a hub

@@ -20,8 +20,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import torch
 
-from pipeline.dataset import INDEX_COLUMNS, SIDECAR_DATASET, SIDECAR_EPISODES, Episode, Feature
-from pipeline.dataset_card import DatasetCard
+from pipeline.dataset.card import DatasetCard
+from pipeline.dataset.schema import INDEX_COLUMNS, SIDECAR_DATASET, SIDECAR_EPISODES, Episode, Feature
 from pipeline.errors import InputError
 
 

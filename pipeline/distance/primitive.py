@@ -13,11 +13,11 @@ Closed forms: box (clamp; inside, the nearest face), sphere (radial), cylinder (
 axial clamp; inside, the nearer of side and cap), capsule (distance to the axis segment minus
 the radius). A per-axis scale keeps a box a box but turns a sphere into an ellipsoid, a
 cylinder into an elliptic cylinder and a capsule into an elliptic cylinder with ellipsoidal
-caps; those use :mod:`pipeline.distance_ellipsoid` (exact to rounding), run point by point in the
-fused float64 warp kernels of :mod:`pipeline.distance_scaled_warp` (numpy, torch CPU or CUDA; the
+caps; those use :mod:`pipeline.distance.ellipsoid` (exact to rounding), run point by point in the
+fused float64 warp kernels of :mod:`pipeline.distance.scaled_warp` (numpy, torch CPU or CUDA; the
 numpy/torch ``local_xp`` where warp cannot run, and as the kernels' reference). The box and the chair
 (union of boxes) are numpy/torch in ``local``; their ``world`` (a pose per frame, numpy points) runs the
-same math fused with the pose in :mod:`pipeline.distance_box_warp`. For the scaled capsule
+same math fused with the pose in :mod:`pipeline.distance.box_warp`. For the scaled capsule
 (fold z to z >= 0, cap ellipsoid E centred at +H):
 
 * outside: the solid is convex and symmetric, so the nearer of the projections onto the
@@ -34,10 +34,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.array_ns import nonzero
-from pipeline.distance_ellipsoid import Ellipsoid
+from pipeline.distance.array_ns import nonzero
+from pipeline.distance.ellipsoid import Ellipsoid
+from pipeline.distance.warp_runtime import runs_on
 from pipeline.geometry import Chair, Primitive
-from pipeline.warp_runtime import runs_on
 
 EPS = 1e-9  # m: a point this close to the surface takes the outward normal as its direction
 
@@ -115,8 +115,8 @@ class BoxShape:
         return _box(x, y, z, *self.half, xp)
 
     def world(self, points, R, t):
-        """As :meth:`SphereShape.world`: the fused kernel of :mod:`pipeline.distance_box_warp`."""
-        from pipeline import distance_box_warp
+        """As :meth:`SphereShape.world`: the fused kernel of :mod:`pipeline.distance.box_warp`."""
+        from pipeline.distance import box_warp as distance_box_warp
 
         return distance_box_warp.box_world_field(self.half, points, R, t)
 
@@ -135,7 +135,7 @@ class SphereShape:
             u = (xp.where(rho > 0, x / safe, 1.0), y / safe, z / safe)
             return abs(rho - r), u, (r * u[0], r * u[1], r * u[2])
         if runs_on(x):
-            from pipeline import distance_scaled_warp
+            from pipeline.distance import scaled_warp as distance_scaled_warp
 
             return distance_scaled_warp.sphere(self.radii, x, y, z, xp)
         return self.local_xp(x, y, z, xp)
@@ -145,7 +145,7 @@ class SphereShape:
         i // (N / T), in one warp kernel; None (round) where not fused."""
         if _isotropic(self.radii):
             return None
-        from pipeline import distance_scaled_warp
+        from pipeline.distance import scaled_warp as distance_scaled_warp
 
         return distance_scaled_warp.sphere_world_field(self.radii, points, R, t)
 
@@ -170,7 +170,7 @@ class CylinderShape:
 
     def local(self, x, y, z, xp):
         if not _isotropic(self.radii) and runs_on(x):
-            from pipeline import distance_scaled_warp
+            from pipeline.distance import scaled_warp as distance_scaled_warp
 
             return distance_scaled_warp.cylinder(self.radii, self.half_length, x, y, z, xp)
         return self.local_xp(x, y, z, xp)
@@ -179,7 +179,7 @@ class CylinderShape:
         """As :meth:`SphereShape.world` (fused for an elliptic section only)."""
         if _isotropic(self.radii):
             return None
-        from pipeline import distance_scaled_warp
+        from pipeline.distance import scaled_warp as distance_scaled_warp
 
         return distance_scaled_warp.cylinder_world_field(self.radii, self.half_length, points, R, t)
 
@@ -218,7 +218,7 @@ class CapsuleShape:
         if _isotropic(self.radii):
             return self._round(x, y, z, xp)
         if runs_on(x):
-            from pipeline import distance_scaled_warp
+            from pipeline.distance import scaled_warp as distance_scaled_warp
 
             return distance_scaled_warp.capsule(self.radii, self.half_length, x, y, z, xp)
         return self.local_xp(x, y, z, xp)
@@ -227,7 +227,7 @@ class CapsuleShape:
         """As :meth:`SphereShape.world` (fused for a scaled capsule only)."""
         if _isotropic(self.radii):
             return None
-        from pipeline import distance_scaled_warp
+        from pipeline.distance import scaled_warp as distance_scaled_warp
 
         return distance_scaled_warp.capsule_world_field(self.radii, self.half_length, points, R, t)
 
@@ -316,8 +316,8 @@ class ChairShape:
         return phi, g, (c[0] + ox, c[1] + oy, c[2] + oz)
 
     def world(self, points, R, t):
-        """As :meth:`SphereShape.world`: the fused kernel of :mod:`pipeline.distance_box_warp` (same tie rule)."""
-        from pipeline import distance_box_warp
+        """As :meth:`SphereShape.world`: the fused kernel of :mod:`pipeline.distance.box_warp` (same tie rule)."""
+        from pipeline.distance import box_warp as distance_box_warp
 
         return distance_box_warp.boxes_world_field(tuple((box.half, o) for box, o in self.parts), points, R, t)
 

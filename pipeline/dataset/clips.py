@@ -39,10 +39,10 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.clip import HumanClip, ObjectTrack, PhysicalizedClip, RobotClip, Skeleton
-from pipeline.dataset import Episode, Feature
+from pipeline.dataset.schema import Episode, Feature
 from pipeline.errors import InputError
 from pipeline.geometry import geometry_from_dict, geometry_to_dict
-from pipeline.robot import G1_JOINT_NAMES, QPOS_NAMES
+from pipeline.robot import G1_JOINT_NAMES, NV_ROBOT, QPOS_NAMES
 
 POSE_NAMES = ("x", "y", "z", "qw", "qx", "qy", "qz")
 QVEL_NAMES: tuple[str, ...] = ("root_vx", "root_vy", "root_vz", "root_wx", "root_wy", "root_wz") + G1_JOINT_NAMES
@@ -100,7 +100,7 @@ def qvel_from_qpos(qpos: np.ndarray, fps: float) -> np.ndarray:
     at the first and last frame, zeros for a one-frame clip."""
     qpos = np.asarray(qpos, dtype=np.float64)
     if qpos.shape[0] < 2:
-        return np.zeros((qpos.shape[0], 35))
+        return np.zeros((qpos.shape[0], NV_ROBOT))
     d = qpos_difference(qpos[:-1], qpos[1:], 1.0 / fps)
     return np.concatenate([d[:1], 0.5 * (d[:-1] + d[1:]), d[-1:]], axis=0)
 
@@ -277,7 +277,7 @@ def _robot_clip(ep: Episode, root, e: int, fps: float) -> RobotClip:
 
 def episodes_to_robot_clips(root: str | Path) -> list[RobotClip]:
     """Robot clips back from a dataset written from :func:`robot_clips_to_episodes`."""
-    from pipeline.dataset_read import iter_episodes, read_info
+    from pipeline.dataset.read import iter_episodes, read_info
 
     fps = read_info(root)["fps"]
     return [_robot_clip(ep, root, e, fps) for e, ep in enumerate(iter_episodes(root))]
@@ -336,7 +336,7 @@ def physicalized_clips_to_episodes(clips: Sequence[PhysicalizedClip]) -> tuple[l
 def episodes_to_physicalized_clips(root: str | Path) -> list[PhysicalizedClip]:
     """Simulated clips back from a dataset written from :func:`physicalized_clips_to_episodes`; a
     dataset without the simulation's columns (e.g. a retargeted one) is an :class:`InputError`."""
-    from pipeline.dataset_read import iter_episodes, read_info
+    from pipeline.dataset.read import iter_episodes, read_info
 
     info = read_info(root)
     names = info["features"]
@@ -432,7 +432,7 @@ def human_clips_to_episodes(
 
 def episodes_to_human_clips(root: str | Path) -> list[HumanClip]:
     """Human clips back from a dataset written from :func:`human_clips_to_episodes`."""
-    from pipeline.dataset_read import iter_episodes, read_info
+    from pipeline.dataset.read import iter_episodes, read_info
 
     fps = read_info(root)["fps"]
     clips = []

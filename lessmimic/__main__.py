@@ -1,0 +1,3 @@
+from lessmimic.cli import run
+
+run()

@@ -1,0 +1,31 @@
+"""Files written whole or not at all: into a temporary name beside the target, then ``os.replace``
+(atomic on one file system), so a reader, or a run killed with SIGKILL, never sees half a file."""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import uuid
+from pathlib import Path
+
+
+def write_bytes_atomic(path: Path, data: bytes) -> None:
+    """``path`` holds ``data`` (parent folders created), or is as it was."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_json_atomic(path: Path, data: dict) -> None:
+    """``data`` as indented JSON with sorted keys (numpy and paths as strings)."""
+    write_bytes_atomic(path, (json.dumps(data, indent=2, sort_keys=True, default=str) + "\n").encode())
+
+
+def write_pickle_atomic(path: Path, obj: object) -> None:
+    write_bytes_atomic(path, pickle.dumps(obj))
