@@ -10,7 +10,7 @@ skips it; training time not in ``rt``).
 
 Run: ``make bench-physicalize``. Clips: the four embedded default clips and, when ``../shared/mocap``
 is present, the OMOMO box clip, the InterMimic table clip and the PyMO walk. Each clip is first
-retargeted (not timed), then physicalized by :func:`physicalize.stage.physicalize_clip` (timed:
+retargeted (not timed), then physicalized by :func:`physicalize.clip.physicalize_clip` (timed:
 scene build, reference, plan and closed-loop tracking on one core). ``rt`` is simulated seconds
 per wall second, ``rt/core`` per CPU second (robust to a shared, loaded machine: everything runs on one
 thread); the issue's bar is >= 5 per core. ``ref tau``: the largest static torque the tracked reference asks of an
@@ -40,9 +40,10 @@ torch.set_num_threads(1)
 
 import numpy as np  # noqa: E402
 
+from physicalize.clip import physicalize_clip  # noqa: E402
+from physicalize.problem import REFERENCES  # noqa: E402
 from physicalize.residual import train_residual  # noqa: E402
 from physicalize.rollout import initial_state, simulate  # noqa: E402
-from physicalize.stage import REFERENCES, physicalize_clip  # noqa: E402
 from physicalize.synthetic_gait import gait_reference, walk_with_turn  # noqa: E402
 from physicalize.wbc import WholeBodyController  # noqa: E402
 from physicalize.wbc_config import TEACHER_GAINS  # noqa: E402

@@ -71,16 +71,14 @@ class FeasibleConfig:
     swing_orientation_cost: float = 3.0
     hand_position_cost: float = 10.0
     hand_orientation_cost: float = 0.5
-    seat_position_cost: float = (
-        300.0  # sitting links on their reference position while the seat supports them (physicalize.seat)
-    )
+    # sitting links on their reference position while the seat supports them (physicalize.seat)
+    seat_position_cost: float = 300.0
     pelvis_orientation_cost: float = 3.0
     torso_orientation_cost: float = 3.0
     posture_cost: float = 0.3
     damping: float = 1.0  # per rad^2 of step: keeps a nearly straight leg from oscillating
-    task_lm_damping: float = (
-        1.0  # mink's error-scaled damping (mu = lm ||W e||^2): small steps toward unreachable targets
-    )
+    # mink's error-scaled damping (mu = lm ||W e||^2): small steps toward unreachable targets
+    task_lm_damping: float = 1.0
     iterations: int = 3  # at most this many QP steps per frame ...
     tolerance: float = 2e-4  # ... stopping once every planted foot and the CoM are this close to their targets [m]
     init_iterations: int = 30  # first frame (no speed limit)
@@ -97,9 +95,8 @@ class FeasibleConfig:
     self_min_distance: float = 0.005  # m
     object_collision: bool = True  # robot vs object avoidance, with the objects at their reference poses (when given)
     object_min_distance: float = 0.0  # m: touching is fine, penetrating is not
-    collision_detection_distance: float = (
-        0.02  # m: pairs closer than this enter the QP (0.05: Carry 6.7 s instead of 1.4 s)
-    )
+    # m: pairs closer than this enter the QP (0.05: Carry 6.7 s instead of 1.4 s)
+    collision_detection_distance: float = 0.02
     collision_gain: float = 0.85
 
 

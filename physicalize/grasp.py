@@ -22,7 +22,7 @@ track this module plans, per control frame ``t`` and hand ``k``:
   the point :attr:`GraspConfig.grip_above` over the object's centre of mass: point contacts resist no
   torque about the line between them, so offset anchors make the squeezes a couple that spins the object
   and a grip axis beside the centre of mass lets it swing. The feasible reference's IK re-solves the arms
-  onto these targets (``attached``; :func:`physicalize.stage.tracking_problem`). Squeezing hands also
+  onto these targets (``attached``; :func:`physicalize.problem.tracking_problem`). Squeezing hands also
   track their reference orientation (:attr:`GraspConfig.w_hold_rot`). Velocity and acceleration
   targets are the finite differences of ``c*``; the hand task weight is :attr:`GraspConfig.w_hold` while
   holding.
@@ -77,9 +77,8 @@ from pipeline.rotations import quat_mat
 from pipeline.scene import Scene, link_collision_geoms, nearest_geom_pair
 
 GRAVITY = 9.81
-FRICTION_TOL_N = (
-    0.5  # N: a planned force this far outside a friction cone still counts as inside (resting objects: numerical noise)
-)
+# N: a planned force this far outside a friction cone still counts as inside (resting objects: numerical noise)
+FRICTION_TOL_N = 0.5
 
 
 @dataclass(frozen=True)
@@ -105,9 +104,8 @@ class GraspConfig:
     push_travel: float = 0.10  # m: a one-hand contact holds only an object the reference slides this far (a push)
     max_hand_force: float = 120.0  # N: cap on the force one hand applies
     clearance: float = 0.05  # m: an unlabelled hand's surface is kept this far from objects
-    approach_frames: int = (
-        25  # ... except this many frames before and after its labelled contacts (reaching, letting go)
-    )
+    # ... except this many frames before and after its labelled contacts (reaching, letting go)
+    approach_frames: int = 25
     w_clear: float = 50.0
     # share of a lifted object's weight the hands carry when they hold it from one side (not squeezed between them)
     side_lift: float = 0.5
@@ -139,13 +137,11 @@ class GraspSchedule:
     rot_weight: np.ndarray  # (T, 2) hand orientation task weight (0 when not grasping)
     mu: float
     replace_measured: bool = True
-    attached: np.ndarray | None = (
-        None  # (T, 2, 3) the tracked hand point without the squeeze (on the object's track / kept off it)
-    )
+    # (T, 2, 3) the tracked hand point without the squeeze (on the object's track / kept off it)
+    attached: np.ndarray | None = None
     hold_ref: np.ndarray | None = None  # (T, 2, 3) reference position of the object each hand holds (0 when none)
-    clear: np.ndarray | None = (
-        None  # (T, 2) bool: the hand's target is moved off an object it does not touch in the reference
-    )
+    # (T, 2) bool: the hand's target is moved off an object it does not touch in the reference
+    clear: np.ndarray | None = None
 
     def hand_body_targets(self) -> np.ndarray:
         """(T, 2, 3) hand body origins that put the tracked points on :attr:`attached` at the reference hand

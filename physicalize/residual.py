@@ -49,6 +49,7 @@ import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
+from physicalize.problem import tracking_problem
 from physicalize.reference import Reference
 from physicalize.rollout import SUBSTEPS, fallen
 from physicalize.wbc import WholeBodyController
@@ -90,7 +91,7 @@ class ResidualConfig:
     w_action_rate: float = 0.01
     max_episode_frames: int = 250
     start_margin: int = 10  # episodes start at frames [0, T - start_margin)
-    reference: str = "feasible"  # tracked reference (physicalize.stage.tracking_problem)
+    reference: str = "feasible"  # tracked reference (physicalize.problem.tracking_problem)
     profile: str = "mjlab"
     num_steps_per_env: int = 24
     hidden_dims: tuple[int, ...] = (256, 128)
@@ -306,8 +307,6 @@ def train_residual(
     ``config.num_steps_per_env`` env steps; torch on 1 thread, seeded) and write the checkpoint to
     ``out_path`` (atomically). Deterministic for a seed on one machine."""
     from rsl_rl.runners import OnPolicyRunner
-
-    from physicalize.stage import tracking_problem
 
     torch.manual_seed(seed)
     threads = torch.get_num_threads()

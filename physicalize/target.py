@@ -34,16 +34,14 @@ class Target:
     hand_acc: np.ndarray | None = None
     hand_weight: np.ndarray | None = None  # (2,) task weight per hand
     hand_force: np.ndarray | None = None  # (2, 3) force each hand applies to a held object (world)
-    hand_object: np.ndarray | None = (
-        None  # (2,) body id whose measured contacts with that forearm and hand hand_force replaces, -1 none
-    )
+    # (2,) body id whose measured contacts with that forearm and hand hand_force replaces, -1 none
+    hand_object: np.ndarray | None = None
     hand_rot: np.ndarray | None = None  # (2, 3, 3) hand orientations, tracked with weights hand_rot_weight (2,)
     hand_rot_weight: np.ndarray | None = None
     hand_hold_body: np.ndarray | None = None  # (2,) body id of the object each hand holds, -1 none
     seated: bool = False  # a seat carries the body: the QP holds its contacts (physicalize.seat)
-    hand_hold_ref: np.ndarray | None = (
-        None  # (2, 3) that object's reference position: its lag beyond hand_lead moves the hand target along
-    )
+    # (2, 3) that object's reference position: its lag beyond hand_lead moves the hand target along
+    hand_hold_ref: np.ndarray | None = None
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """The whole-body QP controller's gains and task weights (:class:`WBCConfig`, used by
 :class:`physicalize.wbc.WholeBodyController`) and the base teacher's ordered gain sets
-(:data:`TEACHER_GAINS`, tried per clip by :func:`physicalize.stage.physicalize_clip`)."""
+(:data:`TEACHER_GAINS`, tried per clip by :func:`physicalize.clip.physicalize_clip`)."""
 
 from __future__ import annotations
 
@@ -39,41 +39,34 @@ class WBCConfig:
     seated_foot_load: float = 0.1  # least share of the weight on each stance foot while seated
     w_qdd: float = 1e-4
     w_force: float = 1e-5
-    effort_scale: float = (
-        0.95  # the QP's torque bounds as a fraction of the actuators' effort limits (1.0: 31% of walk frames saturated)
-    )
+    # the QP's torque bounds as a fraction of the actuators' effort limits (1.0: 31% of walk frames saturated)
+    effort_scale: float = 0.95
     joint_limits: bool = True  # the joint-range rows below (False: the QP knows no joint range)
     limit_rate: float = 15.0  # alpha [1/s] of the joint-range barrier (see physicalize.wbc_rows.limit_bounds)
     limit_zeta: float = 1.0  # damping ratio of the barrier (1: critically damped)
     limit_margin: float = 0.01  # the barrier keeps joints this far [rad] inside their MuJoCo range
     limit_active: float = 300.0  # a range row enters the QP when its bound on |qdd| is under this [rad/s^2]
-    touchdown_rate: float = (
-        25.0  # a [1/s] of the swing-foot touchdown rows (0: none; see physicalize.wbc_rows.soft_rows)
-    )
-    touchdown_speed: float = (
-        0.8  # m/s (0.5 fell in test_gait's -y push while walking): a descent-speed cap zdd >= -a (zd + speed)
-    )
+    # a [1/s] of the swing-foot touchdown rows (0: none; see physicalize.wbc_rows.soft_rows)
+    touchdown_rate: float = 25.0
+    # m/s (0.5 fell in test_gait's -y push while walking): a descent-speed cap zdd >= -a (zd + speed)
+    touchdown_speed: float = 0.8
     touchdown_zone: float = 0.10  # m: sole corners higher than this get no row
     # m: a held object farther than this from its reference position takes the hand targets along (the rest stays a
     # bounded push towards the reference)
     hand_lead: float = 0.05
-    clearance: float = (
-        0.0  # m: legs keep this far from objects (their contact is never planned; 0.01: the OMOMO clip fell at 0.62 s)
-    )
-    clearance_rate: float = (
-        15.0  # a [1/s] of the clearance barrier (0: no rows; see physicalize.wbc_rows.clearance_rows)
-    )
+    # m: legs keep this far from objects (their contact is never planned; 0.01: the OMOMO clip fell at 0.62 s)
+    clearance: float = 0.0
+    # a [1/s] of the clearance barrier (0: no rows; see physicalize.wbc_rows.clearance_rows)
+    clearance_rate: float = 15.0
     clearance_zone: float = 0.05  # m: pairs farther than clearance + this get no row
     w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
     # contact state from the simulation
     contact_stance: bool = True
-    other_support: float = (
-        0.2  # fraction of the weight carried by other contacts (a seat) that turns the stepping logic off
-    )
+    # fraction of the weight carried by other contacts (a seat) that turns the stepping logic off
+    other_support: float = 0.2
     touch_force: float = 20.0  # N: a foot pressing the floor this hard is in contact
-    touchdown_height: float = (
-        0.02  # m: a swing foot in contact whose reference sole is this low and not rising has landed
-    )
+    # m: a swing foot in contact whose reference sole is this low and not rising has landed
+    touchdown_height: float = 0.02
     descend_speed: float = 0.3  # m/s: a stance foot not yet on the floor is driven down at this speed
     # capture-point (DCM) step adjustment of the swing foot's landing point
     step_gain: float = 1.0  # landing point shift per metre of DCM error
@@ -85,7 +78,7 @@ class WBCConfig:
 
 
 # The base teacher's gain sets, tried in order on a clip until one tracks it validly
-# (physicalize.stage.physicalize_clip):
+# (physicalize.clip.physicalize_clip):
 # heavier horizontal CoM tasks make posture, orientation and hand tasks yield to balance. Alone, (5000, 5000, 1000)
 # walks
 # 44 of the gait envelope's 50 walks (the first set 32) and the default Carry, but the OMOMO box falls and SitStand

@@ -119,9 +119,8 @@ class ObjectTrack:
     contact: np.ndarray | None = None
     mass: float | None = None
     source: str = ""
-    friction: float | None = (
-        None  # sliding friction coefficient against anything it touches (the object's geoms win MuJoCo's mixing)
-    )
+    # sliding friction coefficient against anything it touches (the object's geoms win MuJoCo's mixing)
+    friction: float | None = None
 
     def __post_init__(self):
         pose = check_array(self.pose, (None, 7), f"object {self.name} pose", self.source)

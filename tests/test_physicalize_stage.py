@@ -7,8 +7,9 @@ import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 
 from lessmimic.cli import main
+from physicalize.clip import NO_RETRY_GRIP_OUT, physicalize_clip
 from physicalize.reference import place_on_floor
-from physicalize.stage import NO_RETRY_GRIP_OUT, _run_one, physicalize_clip
+from physicalize.stage import _run_one
 from physicalize.wbc_config import TEACHER_GAINS, WBCConfig
 from pipeline.clip import ObjectTrack, RobotClip
 from pipeline.dataset import write_dataset

@@ -9,10 +9,11 @@ import pytest
 import torch
 
 from lessmimic.cli import main
+from physicalize.clip import parse_teacher, physicalize_clip
+from physicalize.problem import tracking_problem
 from physicalize.reference import place_on_floor
 from physicalize.residual import ResidualConfig, ResidualEnv, ResidualPolicy, observe, train_residual
 from physicalize.rollout import initial_state, replay, simulate
-from physicalize.stage import parse_teacher, physicalize_clip, tracking_problem
 from physicalize.wbc import WholeBodyController
 from pipeline.clip import RobotClip
 from pipeline.errors import InputError

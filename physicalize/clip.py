@@ -1,0 +1,228 @@
+"""Physicalize one retargeted clip: track its reference (:mod:`physicalize.problem`) closed loop in MuJoCo
+with the teacher (``base``: :class:`physicalize.wbc.WholeBodyController`, optionally plus a learned residual,
+:mod:`physicalize.residual`), record the state-action trajectory (:mod:`physicalize.rollout`), replay the
+actions open loop to check self-consistency, and measure the validity figures (:mod:`physicalize.validate`).
+The base teacher tries its QP gain sets (:data:`physicalize.wbc_config.TEACHER_GAINS`) in order until a rollout
+is valid."""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from physicalize.problem import tracking_problem
+from physicalize.rollout import Rollout, initial_state, replay, simulate
+from physicalize.static_torque import static_torque_figures
+from physicalize.validate import validate
+from physicalize.wbc import WholeBodyController
+from physicalize.wbc_config import TEACHER_GAINS, WBCConfig
+from pipeline.clip import RobotClip
+from pipeline.errors import InputError
+from pipeline.robot import FREE_NQ, NQ_ROBOT
+
+TEACHERS = ("base", "base+residual:<checkpoint>")
+REPLAY_TOL_M = 1e-6
+# share of held frames whose planned hand forces leave the friction cones (the InterMimic table: 0.85)
+NO_RETRY_GRIP_OUT = 0.5
+
+
+@dataclass(frozen=True)
+class TeacherSpec:
+    """A parsed ``--teacher``: the base QP controller, optionally with a learned residual checkpoint
+    (``digest``: the checkpoint file's sha256, part of the cache key and the provenance)."""
+
+    name: str
+    checkpoint: Path | None = None
+    digest: str | None = None
+
+
+def parse_teacher(teacher: str) -> TeacherSpec:
+    """``base`` or ``base+residual:<checkpoint path>``; anything else, or a checkpoint that is not a
+    file, is an :class:`InputError` (one line naming the teacher or the path)."""
+    if teacher == "base":
+        return TeacherSpec("base")
+    prefix = "base+residual:"
+    if not teacher.startswith(prefix) or not teacher[len(prefix) :]:
+        raise InputError(teacher, "--teacher", f"unknown teacher; available: {', '.join(TEACHERS)}")
+    path = Path(teacher[len(prefix) :]).expanduser()
+    if not path.is_file():
+        raise InputError(
+            path, "--teacher", "residual checkpoint not found (train one with `lessmimic physicalize-residual`)"
+        )
+    return TeacherSpec("base+residual", path, hashlib.sha256(path.read_bytes()).hexdigest())
+
+
+_RESIDUALS: dict = {}
+
+
+def load_residual(path: str, digest: str):
+    """The checkpoint's policy, loaded once per (path, content)."""
+    if (path, digest) not in _RESIDUALS:
+        from physicalize.residual import ResidualPolicy
+
+        _RESIDUALS[(path, digest)] = ResidualPolicy.load(path)
+    return _RESIDUALS[(path, digest)]
+
+
+def _reference_figures(scene, ref, fps: float) -> tuple[dict, str]:
+    """What the tracked reference asks beyond the robot, the same for every rollout of it: the static
+    upper-body torque (:mod:`physicalize.static_torque`) and the share of held frames whose planned hand
+    forces leave the friction cones; with the cause an invalid rollout's reason names ("" when none)."""
+    loads = None if ref.grasp is None else (ref.grasp.offset, ref.grasp.force)
+    figures = static_torque_figures(
+        ref.qpos, loads, scene.profile.effort_limit, fps
+    )  # what the reference asks of the upper body
+    if ref.grasp is None:
+        held = outside = np.zeros(0, bool)
+    else:
+        held = ref.grasp.grasped.any(axis=1)
+        outside = held & ~ref.grasp.friction_ok
+    figures["reference_grasp_outside_friction_frac"] = float(outside.sum() / max(held.sum(), 1))  # of the held frames
+    cause = (
+        f"; the hands' planned force leaves their friction cones from t={np.flatnonzero(outside)[0] / fps:.2f} s"
+        if outside.any()
+        else ""
+    )
+    return figures, cause  # a cause no controller can overcome
+
+
+def _figures(
+    scene, roll: Rollout, clip: RobotClip, objects, qpos0, qvel0, perturb, reference: tuple[dict, str]
+) -> dict:
+    """The validity figures of one rollout (:mod:`physicalize.validate`), its reference's figures
+    (:func:`_reference_figures`) and the open-loop replay check."""
+    figures = validate(scene, roll, clip.qpos, objects)
+    figures.update(reference[0])
+    if not figures["valid"]:
+        figures["reason"] += reference[1]
+    qs, _ = replay(scene.model, qpos0, qvel0, roll.action)
+    figures["replay_err_max_m"] = float(np.abs(np.vstack([qs[:-1] - roll.qpos, qs[-1:] - roll.final_qpos])).max())
+    if figures["replay_err_max_m"] > REPLAY_TOL_M and perturb is None:
+        figures["valid"] = False
+        figures["reason"] = "; ".join(
+            filter(None, [figures["reason"], f"replay error {figures['replay_err_max_m']:.3g} m > {REPLAY_TOL_M:g}"])
+        )
+    return figures
+
+
+def physicalize_clip(
+    clip: RobotClip,
+    *,
+    profile: str = "mjlab",
+    reference: str = "feasible",
+    perturb=None,
+    teacher: str = "base",
+    grasp: bool = True,
+    gains: tuple[WBCConfig, ...] | None = None,
+) -> tuple[RobotClip | None, Rollout, dict, dict]:
+    """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
+    ``reference`` (see :func:`physicalize.problem.tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`).
+
+    The base teacher tries the QP gain sets ``gains`` (default :data:`physicalize.wbc_config.TEACHER_GAINS`) in
+    order from the same initial state and keeps the first rollout that is valid, else the first set's:
+    rejection sampling over controller gains, each rollout validated on its own. A reference whose hands
+    must push outside their friction cones on most held frames (> :data:`NO_RETRY_GRIP_OUT`) is not
+    retried: no gains make a pressing hand pull. ``figures`` name the set
+    kept (``teacher_gains``, its index) and how many ran (``teacher_attempts``); timings count them all.
+    A residual teacher runs the first set only (its policy was trained on it)."""
+    spec = parse_teacher(teacher)
+    residual = None if spec.checkpoint is None else load_residual(str(spec.checkpoint), spec.digest)
+    gains = (TEACHER_GAINS if gains is None else tuple(gains))[: 1 if residual is not None else None]
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    scene, ref, objects, zmp = tracking_problem(clip, profile, reference, grasp)
+    qpos0, qvel0 = initial_state(scene, ref, objects)
+    tried, wall, cpu = (
+        [],
+        time.perf_counter() - t0,
+        time.process_time() - cpu0,
+    )  # planning + tracking, every attempt (not the checks)
+    ref_figures = _reference_figures(scene, ref, clip.fps)
+    if ref_figures[0]["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT:
+        gains = gains[:1]  # no gains make a pressing hand pull
+    for config in gains:
+        t0, cpu0 = time.perf_counter(), time.process_time()
+        roll = simulate(
+            scene,
+            ref,
+            WholeBodyController(scene.model, scene.profile, config),
+            qpos0,
+            qvel0,
+            contact_links=clip.contact_links,
+            perturb=perturb,
+            residual=residual,
+        )
+        wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
+        tried.append((roll, _figures(scene, roll, clip, objects, qpos0, qvel0, perturb, ref_figures)))
+        if tried[-1][1]["valid"]:
+            break
+    kept = len(tried) - 1 if tried[-1][1]["valid"] else 0
+    roll, figures = tried[kept]
+    if not figures["valid"] and len(tried) > 1:
+        figures["reason"] += "".join(
+            f"; gain set {k}: {f['reason'].split(';')[0]}" for k, (_, f) in enumerate(tried[1:], 1)
+        )
+    figures["teacher_gains"], figures["teacher_attempts"] = kept, len(tried)
+    roll.seconds = wall
+    figures["realtime_factor"] = roll.frames / clip.fps / max(wall, 1e-9)
+    figures["realtime_factor_per_core"] = (
+        roll.frames / clip.fps / max(cpu, 1e-9)
+    )  # CPU time of this (single-threaded) process
+    T = roll.frames
+    sim_objects = tuple(
+        replace(
+            o,
+            pose=roll.qpos[:, scene.object_qpos_adr[o.name] : scene.object_qpos_adr[o.name] + FREE_NQ],
+            contact=None if o.contact is None else o.contact[:T],
+        )
+        for o in clip.objects
+    )
+    robot = RobotClip(
+        roll.qpos[:, :NQ_ROBOT],
+        clip.fps,
+        clip.source,
+        objects=sim_objects,
+        contact_links=clip.contact_links,
+        contacts=roll.contact if clip.contact_links else None,
+        method="lessmimic-wbc" + ("+residual" if residual is not None else ""),
+        task=clip.task,
+        provenance={
+            **clip.provenance,
+            "teacher": teacher,
+            **({"teacher_sha256": spec.digest} if spec.digest else {}),
+            "actuator_profile": profile,
+            "reference": reference,
+            "teacher_gains": kept,
+        },
+    )
+    com = {
+        "reference": ref.com[:T],
+        "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T],
+        "zmp_planned": None if zmp is None else zmp[:T],
+        "simulated": _sim_com(scene.model, roll.qpos),
+        "pelvis_ref": clip.qpos[:T, 2],
+        "pelvis_sim": roll.qpos[:, 2],
+        "support": _support_box(ref)[:T],
+    }
+    return robot, roll, figures, com
+
+
+def _support_box(ref) -> np.ndarray:
+    """(T, 2, 2) per frame the [min, max] x and y of the stance feet's sole corners (the support region's bounds)."""
+    corners = np.where(ref.stance[:, :, None, None], ref.corners[..., :2], np.nan).reshape(ref.frames, -1, 2)
+    return np.stack([np.nanmin(corners, axis=1), np.nanmax(corners, axis=1)], axis=1)
+
+
+def _sim_com(model, qpos: np.ndarray) -> np.ndarray:
+    d = mujoco.MjData(model)
+    out = np.zeros((len(qpos), 3))
+    for t, q in enumerate(qpos):
+        d.qpos[:] = q
+        mujoco.mj_kinematics(model, d)
+        mujoco.mj_comPos(model, d)
+        out[t] = d.subtree_com[model.body("pelvis").id]
+    return out
