@@ -24,6 +24,7 @@ import numpy as np
 from physicalize.feasible import feasible_reference
 from physicalize.reference import Reference, build_reference, place_on_floor
 from pipeline.robot import FOOT_BODIES, NQ_ROBOT, default_qpos
+from pipeline.rotations import yaw_quat
 from pipeline.scene import Scene
 
 FPS = 50.0
@@ -32,10 +33,6 @@ FPS = 50.0
 def _smooth(s: np.ndarray) -> np.ndarray:
     s = np.clip(s, 0.0, 1.0)
     return s * s * (3 - 2 * s)
-
-
-def _yaw_quat(yaw: float) -> np.ndarray:
-    return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
 
 
 def footstep_gait(
@@ -85,13 +82,13 @@ def footstep_gait(
     out = np.zeros((T, NQ_ROBOT))
     for t in range(T):
         for k in range(2):
-            foot_tasks[k].set_target(mink.SE3.from_rotation_and_translation(mink.SO3(_yaw_quat(yaw[t, k])), pos[t, k]))
+            foot_tasks[k].set_target(mink.SE3.from_rotation_and_translation(mink.SO3(yaw_quat(yaw[t, k])), pos[t, k]))
         mid = pos[t].mean(axis=0)
         psi = yaw[t].mean()
         pelvis_task.set_target(
-            mink.SE3.from_rotation_and_translation(mink.SO3(_yaw_quat(psi)), np.array([mid[0], mid[1], pelvis_h]))
+            mink.SE3.from_rotation_and_translation(mink.SO3(yaw_quat(psi)), np.array([mid[0], mid[1], pelvis_h]))
         )
-        torso_task.set_target(mink.SE3.from_rotation_and_translation(mink.SO3(_yaw_quat(psi)), np.zeros(3)))
+        torso_task.set_target(mink.SE3.from_rotation_and_translation(mink.SO3(yaw_quat(psi)), np.zeros(3)))
         for _ in range(30 if t == 0 else 4):
             dq = mink.solve_ik(
                 config, [*foot_tasks, pelvis_task, torso_task, posture], 1.0, "daqp", damping=1e-2, limits=limits

@@ -7,6 +7,8 @@ conversions (the controllers call them every step).
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -39,6 +41,11 @@ def slerp_wxyz(times: np.ndarray, q: np.ndarray, new_times: np.ndarray) -> np.nd
 
 # Rotation taking a y-up frame to a z-up one: +90 deg about x (y -> z, z -> -y).
 Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+def yaw_quat(yaw: float) -> np.ndarray:
+    """The unit quaternion (wxyz) of a rotation by ``yaw`` [rad] about the world z axis."""
+    return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
 
 
 def orientation_error(R_ref: np.ndarray, R: np.ndarray) -> np.ndarray:

@@ -49,6 +49,7 @@ import numpy as np
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.ik_limits import FloorLimit, FrameVelocityLimit, SeparationLimit
 from pipeline.robot import FOOT_BODIES, NQ_ROBOT, default_qpos, joint_velocity_limits
+from pipeline.rotations import yaw_quat
 from pipeline.scene import Scene, object_collision_geoms, robot_collision_geoms, self_collision_groups
 from retarget.contact import ContactTask, FootClearance, contact_ramp, hold_resting
 from retarget.ik_config import IKConfig, ik_model, sole_offset
@@ -59,10 +60,6 @@ def _yaw_of(quat_wxyz: np.ndarray) -> float:
     """Heading of a frame's x-axis: ``atan2(R[1,0], R[0,0])``."""
     w, x, y, z = quat_wxyz
     return math.atan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z))
-
-
-def _yaw_quat(yaw: float) -> np.ndarray:
-    return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
 
 
 class G1Retargeter:
@@ -319,7 +316,7 @@ class G1Retargeter:
                     lateral = targets.pos[0, names.index(left)] - targets.pos[0, names.index(right)]
                     yaw = math.atan2(lateral[1], lateral[0]) - math.pi / 2  # x forward = y lateral turned by -90 deg
                     break
-        q[3:7] = _yaw_quat(yaw)
+        q[3:7] = yaw_quat(yaw)
         # Lift the root so no robot geom starts below the floor (a low pelvis target with straight default legs).
         self.configuration.update(q)
         data, floor = self.configuration.data, self.model.geom("floor").id
@@ -336,7 +333,7 @@ class G1Retargeter:
             if targets.rot_weight[k] > 0:
                 yaw = _yaw_of(targets.quat[t, k])
         z = self.sole[body] + self.config.floor_min_distance
-        return np.concatenate([_yaw_quat(yaw), [xy[0], xy[1], z]])
+        return np.concatenate([yaw_quat(yaw), [xy[0], xy[1], z]])
 
     def _solve_frame(self, tasks: list, limits: list, max_iterations: int, tolerance: float) -> int:
         """Up to ``max_iterations`` QP steps; stops after a step that moves every DoF less than ``tolerance``."""
