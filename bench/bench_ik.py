@@ -31,8 +31,9 @@ import numpy as np  # noqa: E402
 
 from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES, actuator_profile, default_qpos  # noqa: E402
 from pipeline.scene import Scene, SceneObject, build_scene  # noqa: E402
-from retarget.ik import G1Retargeter, targets_from_qpos  # noqa: E402
+from retarget.ik import G1Retargeter  # noqa: E402
 from retarget.ik_config import IKConfig  # noqa: E402
+from retarget.targets import targets_from_qpos  # noqa: E402
 
 
 def _smooth(s: np.ndarray) -> np.ndarray:

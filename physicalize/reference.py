@@ -19,8 +19,8 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from physicalize.target import Target
-from pipeline.dataset.clips import qvel_from_qpos
 from pipeline.foot_contact import keep_runs
+from pipeline.kinematics import qvel_from_qpos
 from pipeline.robot import FOOT_BODIES, HAND_BODIES, NQ_ROBOT, NV_ROBOT, sole_corners
 
 STANCE_HEIGHT = 0.03

@@ -2,7 +2,8 @@
 
 scipy's ``Rotation`` uses scalar-last ``xyzw``; :func:`xyzw_to_wxyz` and :func:`wxyz_to_xyzw` are
 the only places the order is switched. :func:`quat_mat` and :func:`orientation_error` use MuJoCo's own
-conversions (the controllers call them every step).
+conversions (the controllers call them every step); :func:`quat_velocity` is MuJoCo's ``mju_subQuat``
+vectorised over frames (:mod:`pipeline.kinematics` differentiates whole trajectories with it).
 """
 
 from __future__ import annotations
@@ -62,3 +63,34 @@ def quat_mat(q: np.ndarray) -> np.ndarray:
     R = np.empty(9)
     mujoco.mju_quat2Mat(R, q)
     return R.reshape(3, 3)
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
+
+
+def quat_velocity(q1: np.ndarray, q2: np.ndarray, dt: float) -> np.ndarray:
+    """Angular velocity (rad/s, in the frame of ``q1``, equally of ``q2``) turning ``q1`` into ``q2`` in ``dt``.
+
+    ``dq = conj(q1) * q2``; the result is ``axis * angle / dt`` with the angle wrapped to
+    ``[-pi, pi]`` (the shorter way) -- MuJoCo's ``mju_subQuat`` / ``mju_quat2Vel``.
+    """
+    q1 = q1 / np.linalg.norm(q1, axis=-1, keepdims=True)
+    q2 = q2 / np.linalg.norm(q2, axis=-1, keepdims=True)
+    dq = _quat_mul(q1 * np.array([1.0, -1.0, -1.0, -1.0]), q2)
+    dq = np.where(dq[..., :1] < 0, -dq, dq)
+    v = dq[..., 1:]
+    s = np.linalg.norm(v, axis=-1, keepdims=True)
+    angle = 2.0 * np.arctan2(s, dq[..., :1])
+    scale = np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 2.0)
+    return v * scale / dt

@@ -48,7 +48,7 @@ import numpy as np
 
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.ik_limits import FloorLimit, FrameVelocityLimit, SeparationLimit
-from pipeline.robot import FOOT_BODIES, NQ_ROBOT, default_qpos, joint_velocity_limits
+from pipeline.robot import FOOT_BODIES, default_qpos, joint_velocity_limits
 from pipeline.rotations import yaw_quat
 from pipeline.scene import Scene, object_collision_geoms, robot_collision_geoms, self_collision_groups
 from retarget.contact import ContactTask, FootClearance, contact_ramp, hold_resting
@@ -102,9 +102,7 @@ class G1Retargeter:
         objects_pose = self._check_inputs(targets, objects_pose or {}, source)
         tasks = self._body_tasks(targets)
         contact_task, contact_w = self._contact_task(targets)
-        contact = (
-            targets.foot_contact if (targets.foot_contact is not None and cfg.pin_feet) else np.zeros((T, 2), bool)
-        )
+        contact = targets.foot_contact if targets.foot_contact is not None else np.zeros((T, 2), bool)
         clearance = (
             FootClearance(
                 self.model,
@@ -250,13 +248,12 @@ class G1Retargeter:
             limits.append(
                 SeparationLimit(m, [(robot, objects)], minimum_distance_from_collisions=cfg.object_min_distance, **kw)
             )
-        if cfg.self_collision:
-            pairs = self_collision_groups(m)
-            limits.append(
-                SeparationLimit(
-                    m, pairs, skip_kept_apart=True, minimum_distance_from_collisions=cfg.self_min_distance, **kw
-                )
+        pairs = self_collision_groups(m)
+        limits.append(
+            SeparationLimit(
+                m, pairs, skip_kept_apart=True, minimum_distance_from_collisions=cfg.self_min_distance, **kw
             )
+        )
         return limits
 
     def _check_inputs(self, targets: IKTargets, objects_pose: dict, source: str) -> dict[str, np.ndarray]:
@@ -378,37 +375,3 @@ def solve_sequence(
 ) -> np.ndarray:
     """``(T, 36)`` G1 ``qpos`` for ``targets`` in ``scene`` (see :class:`G1Retargeter`)."""
     return G1Retargeter(scene, config).retarget(targets, objects_pose, source=source)
-
-
-def targets_from_qpos(
-    model: mujoco.MjModel,
-    qpos: np.ndarray,
-    body_names: tuple[str, ...],
-    fps: float,
-    pos_weight: float | np.ndarray = 1.0,
-    rot_weight: float | np.ndarray = 0.1,
-    foot_contact: np.ndarray | None = None,
-) -> IKTargets:
-    """:class:`IKTargets` that the G1 trajectory ``qpos`` ``(T, 36)`` reaches exactly (forward kinematics).
-
-    For round-trip checks of the IK: ``model`` is any model whose first 36 ``qpos`` are the G1's.
-    """
-    qpos = np.asarray(qpos, dtype=np.float64)
-    data = mujoco.MjData(model)
-    ids = [model.body(b).id for b in body_names]
-    T, K = qpos.shape[0], len(ids)
-    pos, quat = np.empty((T, K, 3)), np.empty((T, K, 4))
-    for t in range(T):
-        data.qpos[:NQ_ROBOT] = qpos[t]
-        mujoco.mj_kinematics(model, data)
-        pos[t], quat[t] = data.xpos[ids], data.xquat[ids]
-    return IKTargets(
-        body_names=tuple(body_names),
-        pos=pos,
-        quat=quat,
-        pos_weight=np.broadcast_to(np.asarray(pos_weight, float), (K,)).copy(),
-        rot_weight=np.broadcast_to(np.asarray(rot_weight, float), (K,)).copy(),
-        fps=float(fps),
-        scale=1.0,
-        foot_contact=foot_contact,
-    )

@@ -3,11 +3,11 @@
 * :class:`IKConfig` -- solver, iterations, costs, limits, collision and foot-pinning options;
 * :func:`ik_model` -- the scene's model with every free object turned into a mocap body (same
   geoms, so the same collision model as physics, but no object DoFs in the IK);
-* :func:`joint_velocity_limits` -- mjlab's G1 motor speed limits per joint;
-* :func:`sole_offset` -- height of a foot body's origin above its sole, from its collision geoms;
-* :func:`self_collision_groups` -- the robot geoms checked against each other.
+* :func:`sole_offset` -- height of a foot body's origin above its sole, from its collision geoms.
 
-The QP limits the IK adds to mink's live in :mod:`pipeline.ik_limits` (physicalize's IK uses them too).
+The QP limits the IK adds to mink's live in :mod:`pipeline.ik_limits` (physicalize's IK uses them too);
+the G1 motor speed limits in :func:`pipeline.robot.joint_velocity_limits`, the robot geoms checked
+against each other in :func:`pipeline.scene.self_collision_groups`.
 """
 
 from __future__ import annotations
@@ -45,11 +45,10 @@ class IKConfig:
     ``cost^2 error^2``. Body costs come from ``IKTargets``; ``task_lm_damping`` is mink's
     error-scaled damping of those tasks (``mu = task_lm_damping * sum ||W_i e_i||^2``).
 
-    Feet: while ``IKTargets.foot_contact`` is set (and ``pin_feet``), the ``ankle_roll_link``
-    target is replaced by the pose at contact onset with the sole ``floor_min_distance`` above
-    the floor and level, costs ``foot_pin_position_cost`` / ``foot_pin_orientation_cost``;
-    ``pin_anchor`` picks the onset xy and heading: the foot target's (``"target"``) or the
-    robot foot's (``"robot"``).
+    Feet: while ``IKTargets.foot_contact`` is set, the ``ankle_roll_link`` target is replaced by
+    the pose at contact onset with the sole ``floor_min_distance`` above the floor and level,
+    costs ``foot_pin_position_cost`` / ``foot_pin_orientation_cost``; ``pin_anchor`` picks the
+    onset xy and heading: the foot target's (``"target"``) or the robot foot's (``"robot"``).
 
     Object contacts: while ``IKTargets.object_contact`` flags a link, a
     :class:`~retarget.contact.ContactTask` (cost ``contact_cost``, faded in and out over
@@ -71,13 +70,11 @@ class IKConfig:
     velocity_limit_factor: float = 0.5
     root_speed_limit: float = 3.0
     configuration_limit_gain: float = 0.95
-    self_collision: bool = True
     self_min_distance: float = 0.005
     object_min_distance: float = 0.005
     floor_min_distance: float = 0.0
     detection_distance: float = 0.05
     collision_gain: float = 0.85
-    pin_feet: bool = True
     foot_pin_position_cost: float = 30.0
     foot_pin_orientation_cost: float = 10.0
     pin_anchor: str = "target"

@@ -22,10 +22,12 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import mujoco
 import numpy as np
 
 from pipeline.clip import Skeleton
 from pipeline.errors import InputError
+from pipeline.robot import g1_model
 
 MAPPINGS_DIR = Path(__file__).with_name("mappings")
 SIDES = ("left", "right")
@@ -124,8 +126,6 @@ class G1Rest:
 def _geom_extent(model, data, g: int, sign: float = -1.0) -> float:
     """Lowest (``sign=-1``) or highest world z of geom ``g``: exact for spheres and capsules
     (radius, half-length along local z), its local bounding box otherwise."""
-    import mujoco
-
     R, c, size = data.geom_xmat[g].reshape(3, 3), data.geom_xpos[g, 2], model.geom_size[g]
     if model.geom_type[g] in (mujoco.mjtGeom.mjGEOM_SPHERE, mujoco.mjtGeom.mjGEOM_CAPSULE):
         half = size[1] if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE else 0.0
@@ -136,10 +136,6 @@ def _geom_extent(model, data, g: int, sign: float = -1.0) -> float:
 @functools.lru_cache(maxsize=1)
 def g1_rest() -> G1Rest:
     """Forward kinematics of ``g1.xml`` at ``q = 0`` (identity root), shifted so the soles touch ``z = 0``."""
-    import mujoco
-
-    from pipeline.robot import g1_model
-
     model = g1_model()
     mujoco.mj_forward(model, data := mujoco.MjData(model))
     collide = [g for g in range(model.ngeom) if model.geom_contype[g] or model.geom_conaffinity[g]]

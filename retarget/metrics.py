@@ -51,24 +51,21 @@ Definitions (``T`` frames at ``fps``; every ``*_frac*`` is a count of frames div
 ``frames``, ``fps``; ``seconds_wall`` (the producing method's wall time, NaN when unknown);
 ``frames_per_s`` = ``frames / seconds_wall``.
 
-Cost: the compiled scene is cached per object set; one pass over a 325-frame clip with a mesh
-box takes ~40-60 ms. (The G1 compiles without its visual meshes, :func:`pipeline.robot.g1_spec`.)
+The pass over the frames is :func:`retarget.collision_sweep.sweep` (its cost is stated there).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 
-import mujoco
 import numpy as np
 
-from pipeline.clip import HumanClip, ObjectTrack, RobotClip
+from pipeline.clip import HumanClip, RobotClip
 from pipeline.foot_contact import SIDES, detect_foot_contacts
 from pipeline.geometry import MeshGeometry
-from pipeline.robot import FOOT_BODIES, G1_JOINT_NAMES, JOINTS_QPOS, NQ_ROBOT
-from pipeline.scene import Scene, SceneObject, build_scene, link_collision_geoms, nearest_geom_pair
+from pipeline.readers import read_clips, read_robot_clip
+from pipeline.robot import G1_JOINT_NAMES, JOINTS_QPOS
+from retarget.collision_sweep import sweep
 
 METRIC_KEYS: tuple[str, ...] = (
     "ground_penetration_frac_1cm",
@@ -93,8 +90,6 @@ SLIDE_TOL = 0.01
 CONTACT_TOL = 0.02
 JOINT_LIMIT_TOL = 1e-3
 SELF_COLLISION_TOL = 0.005
-FOOT_SITES = ("left_foot", "right_foot")
-_LOWER_BODY_ROOTS = ("pelvis",)
 
 
 def _default_link_map() -> dict[str, str]:
@@ -127,54 +122,6 @@ def _default_link_map() -> dict[str, str]:
 DEFAULT_LINK_MAP: dict[str, str] = _default_link_map()
 
 
-@lru_cache(maxsize=8)
-def _scene(objects: tuple[tuple[str, object], ...]) -> Scene:
-    """The shared collision scene for these (name, geometry) objects (cached: compiling is slow)."""
-    return build_scene([SceneObject(name, geo) for name, geo in objects])
-
-
-def scene_for(objects: tuple[ObjectTrack, ...]) -> Scene:
-    return _scene(tuple((o.name, o.geometry) for o in objects))
-
-
-def _subtree(m: mujoco.MjModel, roots: tuple[str, ...], stop: str = "waist_yaw_link") -> set[int]:
-    """Ids of the bodies under ``roots`` whose chain up to them does not pass ``stop``."""
-    out, stop_id = set(), m.body(stop).id
-    ids = [m.body(r).id for r in roots]
-    for b in range(m.nbody):
-        a = b
-        while a > 0 and a not in ids and a != stop_id:
-            a = m.body_parentid[a]
-        if a in ids:
-            out.add(b)
-    return out
-
-
-def lowest_points(
-    xpos: np.ndarray, xmat: np.ndarray, gtype: np.ndarray, size: np.ndarray, rbound: np.ndarray
-) -> np.ndarray:
-    """(..., G) height of each geom's lowest point: sphere ``z - r``, capsule ``z - |a_z| h - r``,
-    box ``z - sum_k |R_zk| s_k``, cylinder ``z - |a_z| h - r sqrt(1 - a_z^2)``; others ``z - rbound``."""
-    rz = np.abs(xmat[..., 6:9])  # row z of R: world-z component of each local axis
-    r, h = size[:, 0], size[:, 1]
-    drop = np.select(
-        [
-            gtype == mujoco.mjtGeom.mjGEOM_SPHERE,
-            gtype == mujoco.mjtGeom.mjGEOM_CAPSULE,
-            gtype == mujoco.mjtGeom.mjGEOM_BOX,
-            gtype == mujoco.mjtGeom.mjGEOM_CYLINDER,
-        ],
-        [
-            np.broadcast_to(r, rz.shape[:-1]),
-            rz[..., 2] * h + r,
-            (rz * size).sum(-1),
-            rz[..., 2] * h + r * np.sqrt(np.clip(1 - rz[..., 2] ** 2, 0, 1)),
-        ],
-        np.broadcast_to(rbound, rz.shape[:-1]),
-    )
-    return xpos[..., 2] - drop
-
-
 def _nearest_rows(n_target: int, fps_target: float, n_src: int, fps_src: float) -> np.ndarray:
     """Index of the source frame nearest in time to each target frame (clipped to the source)."""
     return np.clip(np.rint(np.arange(n_target) / fps_target * fps_src).astype(int), 0, n_src - 1)
@@ -196,90 +143,9 @@ def _reference_contacts(
     return robot.contacts, list(robot.contact_links)
 
 
-@dataclass
-class _Sweep:
-    """Per-frame results of one pass over the clip (robot collision geoms ``G``)."""
-
-    model: mujoco.MjModel
-    robot_geoms: np.ndarray
-    xpos: np.ndarray  # (T, G, 3)
-    xmat: np.ndarray  # (T, G, 9)
-    sites: np.ndarray  # (T, 2, 3) left/right foot sites
-    obj_depth: np.ndarray  # (T,) deepest robot-object penetration (>= 0)
-    self_depth: np.ndarray  # (T,) deepest robot-robot penetration (>= 0)
-    supported: np.ndarray  # (T,) a pelvis/leg/foot geom within 2 cm of an object
-    preserved: np.ndarray  # (T,) every reference contact matched
-    measurable: bool  # contact preservation can be measured
-
-    def lowest(self) -> np.ndarray:
-        """(T, G) height of each robot collision geom's lowest point."""
-        m, rg = self.model, self.robot_geoms
-        return lowest_points(self.xpos, self.xmat, m.geom_type[rg], m.geom_size[rg], m.geom_rbound[rg])
-
-    def foot_heights(self, low: np.ndarray) -> np.ndarray:
-        """(T, 2) lowest point of each foot's collision geoms."""
-        body = self.model.geom_bodyid[self.robot_geoms]
-        return np.column_stack([low[:, body == self.model.body(b).id].min(axis=1) for b in FOOT_BODIES])
-
-
-def _depths(d: mujoco.MjData, kind: np.ndarray) -> tuple[float, float]:
-    """(robot-object, robot-robot) deepest penetration among ``d``'s contacts (0 when none)."""
-    n = d.ncon
-    if not n:
-        return 0.0, 0.0
-    geom, dist = d.contact.geom[:n], d.contact.dist[:n]
-    k1, k2 = kind[geom[:, 0]], kind[geom[:, 1]]
-    pairs = (((k1 == 1) & (k2 == 2)) | ((k1 == 2) & (k2 == 1)), (k1 == 1) & (k2 == 1))
-    return tuple(max(0.0, -float(dist[p].min())) if p.any() else 0.0 for p in pairs)  # type: ignore[return-value]
-
-
-def _sweep(robot: RobotClip, refs: tuple[np.ndarray, list[str]] | None, need_support: bool) -> _Sweep:
-    """Place robot and objects at every frame; collect geom poses, contacts and the distances asked for."""
-    sc = scene_for(robot.objects)
-    m, d, T = sc.model, mujoco.MjData(sc.model), robot.frames
-    rg = sc.robot_geom_ids
-    obj_bodies = set(sc.object_body_id.values())
-    og = [g for g in range(m.ngeom) if m.geom_contype[g] and m.geom_bodyid[g] in obj_bodies]
-    kind = np.zeros(m.ngeom, np.int8)
-    kind[rg], kind[og] = 1, 2
-    lower = _subtree(m, _LOWER_BODY_ROOTS)
-    lower_geoms = [g for g in rg if m.geom_bodyid[g] in lower]
-    flags, links = refs if refs is not None else (np.zeros((T, 0), bool), [])
-    link_geoms = [link_collision_geoms(m, b) for b in links]
-    site_ids = [m.site(s).id for s in FOOT_SITES]
-    adr = [(sc.object_qpos_adr[o.name], o.pose) for o in robot.objects]
-    out = _Sweep(
-        m,
-        rg,
-        np.empty((T, len(rg), 3)),
-        np.empty((T, len(rg), 9)),
-        np.empty((T, 2, 3)),
-        np.zeros(T),
-        np.zeros(T),
-        np.zeros(T, bool),
-        np.ones(T, bool),
-        refs is not None and (bool(og) or not flags.any()),
-    )
-    for t in range(T):
-        d.qpos[:NQ_ROBOT] = robot.qpos[t]
-        for a, pose in adr:
-            d.qpos[a : a + 7] = pose[t]
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_collision(m, d)
-        out.xpos[t], out.xmat[t], out.sites[t] = d.geom_xpos[rg], d.geom_xmat[rg], d.site_xpos[site_ids]
-        out.obj_depth[t], out.self_depth[t] = _depths(d, kind)
-        if need_support and og:
-            out.supported[t] = nearest_geom_pair(m, d, lower_geoms, og, 2 * FLOAT_TOL)[0] <= FLOAT_TOL
-        out.preserved[t] = all(
-            bool(og) and nearest_geom_pair(m, d, link_geoms[k], og, 2 * CONTACT_TOL)[0] <= CONTACT_TOL
-            for k in np.flatnonzero(flags[t])
-        )
-    return out
-
-
 def ground_clearance(robot: RobotClip) -> np.ndarray:
     """(T,) height of the robot's lowest collision-geom point above the floor ``z = 0``."""
-    return _sweep(robot, None, need_support=False).lowest().min(axis=1)
+    return sweep(robot, None, contact_tol=CONTACT_TOL).lowest().min(axis=1)
 
 
 def _frac(flags: np.ndarray) -> float:
@@ -317,32 +183,32 @@ def retarget_metrics(
     link_map = DEFAULT_LINK_MAP if link_map is None else link_map
     T, fps = robot.frames, robot.fps
     refs = _reference_contacts(robot, human, link_map)
-    sweep = _sweep(robot, refs, need_support=human is None)
-    low = sweep.lowest()
+    swept = sweep(robot, refs, contact_tol=CONTACT_TOL, support_tol=FLOAT_TOL if human is None else None)
+    low = swept.lowest()
     ground = np.maximum(0.0, -low.min(axis=1))
-    feet_h = sweep.foot_heights(low)
+    feet_h = swept.foot_heights(low)
     if human is not None:
         fc = detect_foot_contacts(human).both[_nearest_rows(T, fps, human.frames, human.fps)]
         floating = fc.any(axis=1) & (feet_h > FLOAT_TOL).all(axis=1)
     else:
         fc = feet_h <= FLOAT_TOL
-        floating = (low.min(axis=1) > FLOAT_TOL) & ~sweep.supported
-    slide_frac, slide_speed = foot_slide(sweep.sites, fc, fps)
-    lo, hi = (np.array([sweep.model.jnt_range[sweep.model.joint(j).id, k] for j in G1_JOINT_NAMES]) for k in (0, 1))
+        floating = (low.min(axis=1) > FLOAT_TOL) & ~swept.supported
+    slide_frac, slide_speed = foot_slide(swept.sites, fc, fps)
+    lo, hi = (np.array([swept.model.jnt_range[swept.model.joint(j).id, k] for j in G1_JOINT_NAMES]) for k in (0, 1))
     limit_frac, speed = joint_metrics(robot.qpos, fps, lo, hi)
     wall = float("nan") if seconds_wall is None else float(seconds_wall)
     values = {
         "ground_penetration_frac_1cm": _frac(ground > PENETRATION_TOL),
         "ground_penetration_max_m": _max(ground),
-        "object_penetration_frac_1cm": _frac(sweep.obj_depth > PENETRATION_TOL),
-        "object_penetration_max_m": _max(sweep.obj_depth),
+        "object_penetration_frac_1cm": _frac(swept.obj_depth > PENETRATION_TOL),
+        "object_penetration_max_m": _max(swept.obj_depth),
         "float_frac_2cm": _frac(floating),
         "foot_slide_frac_1cm_per_frame": slide_frac,
         "foot_slide_speed_max_mps": slide_speed,
-        "contact_preservation_frac": _frac(sweep.preserved) if sweep.measurable else float("nan"),
+        "contact_preservation_frac": _frac(swept.preserved) if swept.measurable else float("nan"),
         "joint_limit_violation_frac": limit_frac,
         "max_joint_speed_radps": speed,
-        "self_collision_frac": _frac(sweep.self_depth > SELF_COLLISION_TOL),
+        "self_collision_frac": _frac(swept.self_depth > SELF_COLLISION_TOL),
         "frames": int(T),
         "fps": float(fps),
         "seconds_wall": wall,
@@ -393,8 +259,6 @@ def evaluate_file(
     track (OmniRetarget scales the object's trajectory; the human's track is not used).
     ``seconds_wall``: the peer's own run time when known (else ``frames_per_s`` is NaN).
     """
-    from pipeline.readers import read_clips, read_robot_clip
-
     geometry = MeshGeometry(str(object_mesh)) if object_mesh is not None else None
     robot = read_robot_clip(path, object_geometry=geometry)
     human = read_clips(human_path, mesh=object_mesh)[0] if human_path is not None else None

@@ -21,6 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from pipeline.clip import HumanClip, ObjectTrack
+from pipeline.collision_mesh import load_mesh
 from pipeline.geometry import Chair, MeshGeometry, Primitive
 from pipeline.rotations import rotation_from_wxyz
 from retarget.mapping import G1_ROLES, Mapping
@@ -53,8 +54,6 @@ def object_bottom(geometry, pose: np.ndarray) -> np.ndarray:
     if isinstance(geometry, Primitive):
         pts = _box_corners(geometry.half_extents)
     elif isinstance(geometry, MeshGeometry):
-        from pipeline.collision_mesh import load_mesh
-
         pts = load_mesh(geometry.path).convex_hull.vertices * np.asarray(geometry.scale)
     elif isinstance(geometry, Chair):
         pts = np.concatenate([_box_corners(p.half_extents, c) for _, p, c in geometry.parts()])

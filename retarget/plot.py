@@ -25,7 +25,7 @@ from pipeline.clip import HumanClip, RobotClip  # noqa: E402
 from pipeline.foot_contact import detect_foot_contacts  # noqa: E402
 from pipeline.robot import JOINTS_QPOS, NQ_ROBOT
 from pipeline.stage.figure import save_figure  # noqa: E402
-from retarget.metrics import scene_for  # noqa: E402
+from retarget.collision_sweep import scene_for  # noqa: E402
 
 DIST_CAP = 0.5
 SIDES = ("left", "right")

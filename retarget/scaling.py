@@ -47,6 +47,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.clip import HumanClip, Skeleton
 from pipeline.errors import InputError
+from pipeline.foot_contact import detect_foot_contacts
 from pipeline.readers.keypoints import estimate_height
 from pipeline.rotations import rotation_from_wxyz, wxyz_from_rotation
 from retarget.frames import Reference, body_axes, driver_rotations, reference_pose, rotation_offsets
@@ -271,8 +272,6 @@ def _continuous_quats(R: np.ndarray) -> np.ndarray:
 def foot_contacts(clip: HumanClip) -> np.ndarray | None:
     """``(T, 2)`` human foot-ground contact (left, right) from :mod:`pipeline.foot_contact`; None
     when the skeleton's foot joints are not recognisable there."""
-    from pipeline.foot_contact import detect_foot_contacts
-
     try:
         return detect_foot_contacts(clip).both
     except ValueError:

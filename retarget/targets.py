@@ -3,14 +3,18 @@
 The mapping/scaling step (:mod:`retarget.mapping`, :mod:`retarget.scaling`) turns a
 :class:`~pipeline.clip.HumanClip` into :class:`IKTargets`; the IK (:mod:`retarget.ik`)
 turns :class:`IKTargets` into G1 ``qpos``. Positions are in metres in the robot's world
-(already scaled to the robot), quaternions wxyz.
+(already scaled to the robot), quaternions wxyz. :func:`targets_from_qpos` builds them from a
+known G1 motion by forward kinematics (round-trip checks of the IK).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
+
+from pipeline.robot import NQ_ROBOT
 
 
 @dataclass(frozen=True)
@@ -54,3 +58,37 @@ class IKTargets:
     @property
     def frames(self) -> int:
         return self.pos.shape[0]
+
+
+def targets_from_qpos(
+    model: mujoco.MjModel,
+    qpos: np.ndarray,
+    body_names: tuple[str, ...],
+    fps: float,
+    pos_weight: float | np.ndarray = 1.0,
+    rot_weight: float | np.ndarray = 0.1,
+    foot_contact: np.ndarray | None = None,
+) -> IKTargets:
+    """:class:`IKTargets` that the G1 trajectory ``qpos`` ``(T, 36)`` reaches exactly (forward kinematics).
+
+    For round-trip checks of the IK: ``model`` is any model whose first 36 ``qpos`` are the G1's.
+    """
+    qpos = np.asarray(qpos, dtype=np.float64)
+    data = mujoco.MjData(model)
+    ids = [model.body(b).id for b in body_names]
+    T, K = qpos.shape[0], len(ids)
+    pos, quat = np.empty((T, K, 3)), np.empty((T, K, 4))
+    for t in range(T):
+        data.qpos[:NQ_ROBOT] = qpos[t]
+        mujoco.mj_kinematics(model, data)
+        pos[t], quat[t] = data.xpos[ids], data.xquat[ids]
+    return IKTargets(
+        body_names=tuple(body_names),
+        pos=pos,
+        quat=quat,
+        pos_weight=np.broadcast_to(np.asarray(pos_weight, float), (K,)).copy(),
+        rot_weight=np.broadcast_to(np.asarray(rot_weight, float), (K,)).copy(),
+        fps=float(fps),
+        scale=1.0,
+        foot_contact=foot_contact,
+    )

@@ -13,12 +13,11 @@ from pipeline.dataset.clips import (
     episodes_to_robot_clips,
     human_clips_to_episodes,
     physicalized_clips_to_episodes,
-    qpos_difference,
-    qvel_from_qpos,
     robot_clips_to_episodes,
 )
 from pipeline.errors import InputError
 from pipeline.geometry import Chair, Primitive
+from pipeline.kinematics import qpos_difference, qvel_from_qpos
 from pipeline.robot import QPOS_NAMES
 from pipeline.rotations import wxyz_from_rotation
 

@@ -18,9 +18,9 @@ from pipeline.errors import InputError
 from pipeline.geometry import Primitive
 from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES, default_qpos, joint_limits, joint_velocity_limits
 from pipeline.scene import SceneObject, build_scene
-from retarget.ik import G1Retargeter, solve_sequence, targets_from_qpos
+from retarget.ik import G1Retargeter, solve_sequence
 from retarget.ik_config import IKConfig, ik_model, sole_offset
-from retarget.targets import IKTargets
+from retarget.targets import IKTargets, targets_from_qpos
 
 bench_ik = bench_scripts.load("bench_ik")
 

@@ -16,7 +16,8 @@ from pipeline.clip import HumanClip, ObjectTrack, RobotClip
 from pipeline.geometry import Primitive
 from pipeline.robot import G1_JOINT_NAMES, joint_limits
 from pipeline.synthetic.skeleton import SKELETON
-from retarget.metrics import METRIC_KEYS, evaluate_file, ground_clearance, retarget_metrics, scene_for, summarise
+from retarget.collision_sweep import scene_for
+from retarget.metrics import METRIC_KEYS, evaluate_file, ground_clearance, retarget_metrics, summarise
 
 FPS = 50.0
 T = 20

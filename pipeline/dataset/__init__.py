@@ -3,10 +3,11 @@
 * :mod:`pipeline.dataset.schema` -- :class:`Feature`, :class:`Episode`, validation, names, paths;
 * :mod:`pipeline.dataset.write` -- :func:`write_dataset` (fast, atomic; the on-disk layout);
 * :mod:`pipeline.dataset.merge` -- :func:`merge_datasets` (shards written by parallel workers);
-* :mod:`pipeline.dataset.read` -- :func:`iter_episodes`, :func:`read_columns`, :func:`read_features`,
-  :class:`WindowDataset` (training windows straight from parquet);
+* :mod:`pipeline.dataset.read` -- :func:`iter_episodes`, :func:`read_columns`, :func:`read_features`;
+* :mod:`pipeline.dataset.windows` -- :class:`WindowDataset` (training windows straight from parquet, torch);
 * :mod:`pipeline.dataset.card` -- the dataset card (``README.md``);
 * :mod:`pipeline.dataset.clips` -- clips (:mod:`pipeline.clip`) <-> episodes;
+* :mod:`pipeline.dataset.objects` -- their object tracks <-> object features;
 * :mod:`pipeline.dataset.hub` -- loading by path or repo id, publishing.
 
 The public names below are imported lazily from those modules (writing does not import torch).
@@ -25,7 +26,7 @@ _LAZY = {
     "validate_repo_id": "schema",
     "write_dataset": "write",
     "merge_datasets": "merge",
-    "WindowDataset": "read",
+    "WindowDataset": "windows",
     "iter_episodes": "read",
     "read_columns": "read",
     "read_features": "read",

@@ -5,11 +5,12 @@ Robot datasets (:func:`robot_clips_to_episodes`, :func:`episodes_to_robot_clips`
 * ``observation.state`` -- MuJoCo ``qpos`` (36): root position (m, world), root quaternion
   (wxyz, world), 29 joint angles (rad) in :data:`pipeline.robot.G1_JOINT_NAMES` order;
 * ``observation.qvel`` -- MuJoCo ``qvel`` (35) from finite differences of ``qpos``
-  (:func:`qvel_from_qpos`): root linear velocity in the world frame (m/s), root angular velocity
-  in the body (pelvis) frame (rad/s), joint velocities (rad/s);
+  (:func:`pipeline.kinematics.qvel_from_qpos`): root linear velocity in the world frame (m/s),
+  root angular velocity in the body (pelvis) frame (rad/s), joint velocities (rad/s);
 * ``contact`` -- per contact link, ``True`` when the link touches an object (if the clips name links);
 * ``object.<name>.pose`` -- object pose (x, y, z, qw, qx, qy, qz) in the world frame, and
-  ``object.<name>.contact`` (1 bool) when any clip has contact flags for that object;
+  ``object.<name>.contact`` (1 bool) when any clip has contact flags for that object
+  (:mod:`pipeline.dataset.objects`);
 * ``source_frame`` -- frame index in the source motion: ``t + provenance["source_frame_start"]``
   (0 when absent).
 
@@ -38,71 +39,16 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.clip import HumanClip, ObjectTrack, PhysicalizedClip, RobotClip, Skeleton
+from pipeline.clip import HumanClip, PhysicalizedClip, RobotClip, Skeleton
+from pipeline.dataset.objects import object_data, object_features, objects_from_episode
+from pipeline.dataset.read import iter_episodes, read_info
 from pipeline.dataset.schema import Episode, Feature
 from pipeline.errors import InputError
-from pipeline.geometry import geometry_from_dict, geometry_to_dict
-from pipeline.robot import G1_JOINT_NAMES, NV_ROBOT, QPOS_NAMES
+from pipeline.kinematics import qvel_from_qpos
+from pipeline.robot import G1_JOINT_NAMES, QPOS_NAMES
 
-POSE_NAMES = ("x", "y", "z", "qw", "qx", "qy", "qz")
 QVEL_NAMES: tuple[str, ...] = ("root_vx", "root_vy", "root_vz", "root_wx", "root_wy", "root_wz") + G1_JOINT_NAMES
 DEFAULT_TASK = "humanoid whole-body motion"
-
-
-# --- velocities ----------------------------------------------------------------------------------
-
-
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ],
-        axis=-1,
-    )
-
-
-def quat_velocity(q1: np.ndarray, q2: np.ndarray, dt: float) -> np.ndarray:
-    """Angular velocity (rad/s, in the frame of ``q1``, equally of ``q2``) turning ``q1`` into ``q2`` in ``dt``.
-
-    ``dq = conj(q1) * q2``; the result is ``axis * angle / dt`` with the angle wrapped to
-    ``[-pi, pi]`` (the shorter way) -- MuJoCo's ``mju_subQuat`` / ``mju_quat2Vel``.
-    """
-    q1 = q1 / np.linalg.norm(q1, axis=-1, keepdims=True)
-    q2 = q2 / np.linalg.norm(q2, axis=-1, keepdims=True)
-    dq = _quat_mul(q1 * np.array([1.0, -1.0, -1.0, -1.0]), q2)
-    dq = np.where(dq[..., :1] < 0, -dq, dq)
-    v = dq[..., 1:]
-    s = np.linalg.norm(v, axis=-1, keepdims=True)
-    angle = 2.0 * np.arctan2(s, dq[..., :1])
-    scale = np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 2.0)
-    return v * scale / dt
-
-
-def qpos_difference(q1: np.ndarray, q2: np.ndarray, dt: float) -> np.ndarray:
-    """``mj_differentiatePos`` for the G1 layout: ``(..., 36), (..., 36) -> (..., 35)``."""
-    return np.concatenate(
-        [
-            (q2[..., :3] - q1[..., :3]) / dt,
-            quat_velocity(q1[..., 3:7], q2[..., 3:7], dt),
-            (q2[..., 7:] - q1[..., 7:]) / dt,
-        ],
-        axis=-1,
-    )
-
-
-def qvel_from_qpos(qpos: np.ndarray, fps: float) -> np.ndarray:
-    """``(T, 35)`` velocities: the mean of the backward and forward differences (central), one-sided
-    at the first and last frame, zeros for a one-frame clip."""
-    qpos = np.asarray(qpos, dtype=np.float64)
-    if qpos.shape[0] < 2:
-        return np.zeros((qpos.shape[0], NV_ROBOT))
-    d = qpos_difference(qpos[:-1], qpos[1:], 1.0 / fps)
-    return np.concatenate([d[:1], 0.5 * (d[:-1] + d[1:]), d[-1:]], axis=0)
 
 
 # --- shared helpers ------------------------------------------------------------------------------
@@ -135,63 +81,6 @@ def _common(clips, attr: str, what: str):
     return ref
 
 
-def _object_features(clips) -> tuple[list[Feature], tuple[str, ...], set[str]]:
-    for c in clips:
-        names = tuple(o.name for o in c.objects)
-        if names != tuple(o.name for o in clips[0].objects):
-            raise InputError(
-                c.source, "objects", f"{list(names)} differ from {clips[0].source}; one dataset has one feature spec"
-            )
-        for n in names:
-            if not n or "/" in n:
-                raise InputError(c.source, "objects", f"object name {n!r} is empty or contains '/'")
-    names = tuple(o.name for o in clips[0].objects)
-    with_contact = {o.name for c in clips for o in c.objects if o.contact is not None}
-    feats = []
-    for n in names:
-        feats.append(
-            Feature(f"object.{n}.pose", "float32", POSE_NAMES, f"pose of object {n!r}: position, quaternion wxyz", "m")
-        )
-        if n in with_contact:
-            feats.append(Feature(f"object.{n}.contact", "bool", ("contact",), f"object {n!r} is in contact"))
-    return feats, names, with_contact
-
-
-def _object_data(clip, with_contact: set[str]) -> tuple[dict, list[dict]]:
-    data, meta = {}, []
-    for o in clip.objects:
-        data[f"object.{o.name}.pose"] = o.pose
-        if o.name in with_contact:
-            data[f"object.{o.name}.contact"] = np.zeros(o.frames, bool) if o.contact is None else o.contact
-        meta.append(
-            {
-                "name": o.name,
-                "geometry": geometry_to_dict(o.geometry),
-                "mass": o.mass,
-                "friction": o.friction,
-                "source": o.source,
-                "has_contact": o.contact is not None,
-            }
-        )
-    return data, meta
-
-
-def _objects_back(ep: Episode, source: str) -> tuple[ObjectTrack, ...]:
-    out = []
-    for m in ep.meta.get("objects", []):
-        c = ep.data.get(f"object.{m['name']}.contact")
-        contact = c[:, 0].astype(bool) if c is not None and m.get("has_contact") else None
-        pose = ep.data[f"object.{m['name']}.pose"].astype(np.float64)
-        try:
-            geometry = geometry_from_dict(m["geometry"])
-        except (ValueError, KeyError, TypeError) as exc:  # e.g. a zero scale written by another tool
-            raise InputError(source, f"object {m['name']} geometry", str(exc)) from None
-        out.append(
-            ObjectTrack(m["name"], geometry, pose, contact, m.get("mass"), m.get("source", source), m.get("friction"))
-        )
-    return tuple(out)
-
-
 def _source_frames(T: int, start, ratio: float = 1.0) -> np.ndarray:
     """Source frame of each of ``T`` frames, ``start + round(t ratio)`` (``ratio``: source fps / clip fps,
     for a clip resampled from its source)."""
@@ -210,7 +99,7 @@ def robot_clips_to_episodes(
     """The feature spec and one episode per clip (write them with ``write_dataset(..., fps=clips_fps(clips))``)."""
     fps = clips_fps(clips)
     links = _common(clips, "contact_links", "contact_links")
-    obj_feats, _, with_contact = _object_features(clips)
+    obj_feats, _, with_contact = object_features(clips)
     features = [
         Feature(
             "observation.state",
@@ -236,7 +125,7 @@ def robot_clips_to_episodes(
         data = {"observation.state": c.qpos, "observation.qvel": qvel_from_qpos(c.qpos, fps)}
         if links:
             data["contact"] = np.zeros((c.frames, len(links)), bool) if c.contacts is None else c.contacts
-        obj_data, obj_meta = _object_data(c, with_contact)
+        obj_data, obj_meta = object_data(c, with_contact)
         data.update(obj_data)
         ratio = float(c.provenance.get("source_fps", fps)) / fps
         data["source_frame"] = _source_frames(c.frames, c.provenance.get("source_frame_start"), ratio)
@@ -266,7 +155,7 @@ def _robot_clip(ep: Episode, root, e: int, fps: float) -> RobotClip:
         qpos=ep.data["observation.state"].astype(np.float64),
         fps=float(m.get("fps", fps)),
         source=m["source"],
-        objects=_objects_back(ep, m["source"]),
+        objects=objects_from_episode(ep, m["source"]),
         contact_links=links,
         contacts=contacts,
         method=m.get("method", ""),
@@ -277,8 +166,6 @@ def _robot_clip(ep: Episode, root, e: int, fps: float) -> RobotClip:
 
 def episodes_to_robot_clips(root: str | Path) -> list[RobotClip]:
     """Robot clips back from a dataset written from :func:`robot_clips_to_episodes`."""
-    from pipeline.dataset.read import iter_episodes, read_info
-
     fps = read_info(root)["fps"]
     return [_robot_clip(ep, root, e, fps) for e, ep in enumerate(iter_episodes(root))]
 
@@ -336,8 +223,6 @@ def physicalized_clips_to_episodes(clips: Sequence[PhysicalizedClip]) -> tuple[l
 def episodes_to_physicalized_clips(root: str | Path) -> list[PhysicalizedClip]:
     """Simulated clips back from a dataset written from :func:`physicalized_clips_to_episodes`; a
     dataset without the simulation's columns (e.g. a retargeted one) is an :class:`InputError`."""
-    from pipeline.dataset.read import iter_episodes, read_info
-
     info = read_info(root)
     names = info["features"]
     missing = [
@@ -379,7 +264,7 @@ def human_clips_to_episodes(
         bad = next(c for c in clips if (c.joint_quat is not None) != (clips[0].joint_quat is not None))
         raise InputError(bad.source, "joint_quat", f"present in some clips only (e.g. {clips[0].source} vs this one)")
     has_contacts = any(c.contacts is not None for c in clips)
-    obj_feats, _, with_contact = _object_features(clips)
+    obj_feats, _, with_contact = object_features(clips)
     J = skel.joint_names
     features = [
         Feature(
@@ -412,7 +297,7 @@ def human_clips_to_episodes(
             data["observation.joint_quat"] = c.joint_quat.reshape(T, -1)
         if has_contacts:
             data["contact"] = np.zeros((T, len(J)), bool) if c.contacts is None else c.contacts
-        obj_data, obj_meta = _object_data(c, with_contact)
+        obj_data, obj_meta = object_data(c, with_contact)
         data.update(obj_data)
         data["source_frame"] = _source_frames(T, 0)
         meta = {
@@ -432,8 +317,6 @@ def human_clips_to_episodes(
 
 def episodes_to_human_clips(root: str | Path) -> list[HumanClip]:
     """Human clips back from a dataset written from :func:`human_clips_to_episodes`."""
-    from pipeline.dataset.read import iter_episodes, read_info
-
     fps = read_info(root)["fps"]
     clips = []
     for e, ep in enumerate(iter_episodes(root)):
@@ -455,7 +338,7 @@ def episodes_to_human_clips(root: str | Path) -> list[HumanClip]:
                 subject_height=m.get("subject_height"),
                 joint_quat=None if quat is None else quat.astype(np.float64).reshape(T, J, 4),
                 contacts=contacts,
-                objects=_objects_back(ep, m["source"]),
+                objects=objects_from_episode(ep, m["source"]),
                 task=m.get("clip_task", ep.task),
                 synthetic=bool(m.get("synthetic", False)),
             )

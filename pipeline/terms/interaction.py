@@ -9,7 +9,7 @@ all in the world frame as the paper writes it (:func:`interaction_features`). Th
 variant uses ``v - v_c`` instead of ``v``, with ``v_c`` the velocity of the object's closest
 surface point (:func:`surface_point_velocity`), which is what matters when the object moves with
 the hands (Carry). The interaction window ``I_t = {u_(t-l+1) .. u_t}`` is served by the loaders
-(LeRobot ``delta_timestamps``, :class:`pipeline.dataset.read.WindowDataset`); datasets store u_t.
+(LeRobot ``delta_timestamps``, :class:`pipeline.dataset.windows.WindowDataset`); datasets store u_t.
 
 The demo layout (:func:`demo_features`, the LessMimic web demo's input contract): per query body,
 ``min(phi, max_distance)`` and the gradient in the body's own frame, ``R_body^T g`` (4 per body).
