@@ -136,25 +136,16 @@ def physicalize_clip(
     t0, cpu0 = time.perf_counter(), time.process_time()
     scene, ref, objects, zmp = tracking_problem(clip, profile, reference, grasp)
     qpos0, qvel0 = initial_state(scene, ref, objects)
-    tried, wall, cpu = (
-        [],
-        time.perf_counter() - t0,
-        time.process_time() - cpu0,
-    )  # planning + tracking, every attempt (not the checks)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0  # planning + tracking (not the checks)
     ref_figures = _reference_figures(scene, ref, clip.fps)
     if ref_figures[0]["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT:
         gains = gains[:1]  # no gains make a pressing hand pull
+    tried = []
     for config in gains:
         t0, cpu0 = time.perf_counter(), time.process_time()
+        controller = WholeBodyController(scene.model, scene.profile, config)
         roll = simulate(
-            scene,
-            ref,
-            WholeBodyController(scene.model, scene.profile, config),
-            qpos0,
-            qvel0,
-            contact_links=clip.contact_links,
-            perturb=perturb,
-            residual=residual,
+            scene, ref, controller, qpos0, qvel0, contact_links=clip.contact_links, perturb=perturb, residual=residual
         )
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
         tried.append((roll, _figures(scene, roll, clip, objects, qpos0, qvel0, perturb, ref_figures)))
@@ -169,9 +160,23 @@ def physicalize_clip(
     figures["teacher_gains"], figures["teacher_attempts"] = kept, len(tried)
     roll.seconds = wall
     figures["realtime_factor"] = roll.frames / clip.fps / max(wall, 1e-9)
-    figures["realtime_factor_per_core"] = (
-        roll.frames / clip.fps / max(cpu, 1e-9)
-    )  # CPU time of this (single-threaded) process
+    # CPU time of this (single-threaded) process
+    figures["realtime_factor_per_core"] = roll.frames / clip.fps / max(cpu, 1e-9)
+    provenance = {
+        "teacher": teacher,
+        **({"teacher_sha256": spec.digest} if spec.digest else {}),
+        "actuator_profile": profile,
+        "reference": reference,
+        "teacher_gains": kept,
+    }
+    robot = _simulated_clip(
+        clip, scene, roll, "lessmimic-wbc" + ("+residual" if residual is not None else ""), provenance
+    )
+    return robot, roll, figures, _com_series(clip, scene, ref, zmp, roll)
+
+
+def _simulated_clip(clip: RobotClip, scene, roll: Rollout, method: str, provenance: dict) -> RobotClip:
+    """The clip as simulated: the robot's and the objects' simulated motion, the contacts measured."""
     T = roll.frames
     sim_objects = tuple(
         replace(
@@ -181,25 +186,23 @@ def physicalize_clip(
         )
         for o in clip.objects
     )
-    robot = RobotClip(
+    return RobotClip(
         roll.qpos[:, :NQ_ROBOT],
         clip.fps,
         clip.source,
         objects=sim_objects,
         contact_links=clip.contact_links,
         contacts=roll.contact if clip.contact_links else None,
-        method="lessmimic-wbc" + ("+residual" if residual is not None else ""),
+        method=method,
         task=clip.task,
-        provenance={
-            **clip.provenance,
-            "teacher": teacher,
-            **({"teacher_sha256": spec.digest} if spec.digest else {}),
-            "actuator_profile": profile,
-            "reference": reference,
-            "teacher_gains": kept,
-        },
+        provenance={**clip.provenance, **provenance},
     )
-    com = {
+
+
+def _com_series(clip: RobotClip, scene, ref, zmp, roll: Rollout) -> dict:
+    """Reference, planned and simulated CoM, planned ZMP, pelvis heights and the support box: the clip's plot."""
+    T = roll.frames
+    return {
         "reference": ref.com[:T],
         "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T],
         "zmp_planned": None if zmp is None else zmp[:T],
@@ -208,7 +211,6 @@ def physicalize_clip(
         "pelvis_sim": roll.qpos[:, 2],
         "support": _support_box(ref)[:T],
     }
-    return robot, roll, figures, com
 
 
 def _support_box(ref) -> np.ndarray:

@@ -25,14 +25,8 @@ configurations that miss the footstep constraint in the true kinematics). If the
 footstep equalities is infeasible at a step, that step is taken with the planted feet as
 high-cost tasks instead (counted in ``stats``).
 
-Foot targets (:func:`foot_targets`): during each stance run of the reference's support schedule the
-foot is pinned to one **footstep**: the reference's horizontal position and heading at the run's
-slowest frame, sole flat on the floor (``z = 0``; the whole-body controller also holds stance feet
-flat), over the run's **planted** frames (those where the reference foot is within
-:attr:`FeasibleConfig.footstep_tolerance` of the footstep: a low foot still sliding in to land or
-out to lift off is not pinned). Other frames follow the reference with an offset (position and
-rotation vector) blended linearly from the previous footstep's to the next one's, so a foot lifts
-off and lands on its footsteps without a jump.
+Foot targets (:func:`physicalize.footsteps.foot_targets`): stance feet pinned to footsteps over their
+planted frames, the reference with a blended footstep offset elsewhere.
 
 :func:`feasible_reference` chains plan -> IK -> :class:`~physicalize.reference.Reference` of the
 re-solved motion (the original stance schedule kept, ``com_plan`` set), optionally re-planning on
@@ -48,14 +42,12 @@ from dataclasses import dataclass
 import mink
 import mujoco
 import numpy as np
-from mink.limits.limit import Constraint
-from scipy.spatial.transform import Rotation
 
+from physicalize.footsteps import FootTargets, foot_targets
 from physicalize.plan import plan_com
 from physicalize.reference import Reference, build_reference
 from physicalize.seat import SEAT_LINKS
-from pipeline.foot_contact import runs
-from pipeline.ik_limits import FrameVelocityLimit, SeparationLimit
+from pipeline.ik_limits import FrameVelocityLimit, MinimumJointLimit, SeparationLimit
 from pipeline.robot import FOOT_BODIES, HAND_BODIES, NQ_ROBOT, NV_ROBOT, joint_velocity_limits, sole_corners
 from pipeline.scene import self_collision_groups
 
@@ -100,112 +92,6 @@ class FeasibleConfig:
     collision_gain: float = 0.85
 
 
-class MinimumJointLimit(mink.Limit):
-    r"""``q_i + dq_i >= q_min,i`` for a few hinge joints (a lower bound inside the joint range), as
-    ``-dq_i <= max(q_i - q_min,i, 0)`` so ``dq = 0`` stays feasible from a start below the bound.
-
-    Used on the knees: a straight leg is a kinematic singularity where the linearised footstep
-    constraint is met by large, oscillating steps that miss it by centimetres in the true kinematics.
-    """
-
-    def __init__(self, model: mujoco.MjModel, minimum: dict[str, float]):
-        joints = [model.joint(name).id for name in minimum]
-        self._qadr = model.jnt_qposadr[joints]
-        self._lower = np.array(list(minimum.values()))
-        self._G = np.zeros((len(joints), model.nv))
-        self._G[np.arange(len(joints)), model.jnt_dofadr[joints]] = -1.0
-
-    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> Constraint:
-        del dt
-        return Constraint(G=self._G, h=np.maximum(configuration.q[self._qadr] - self._lower, 0.0))
-
-
-def _yaw_rotation(quat_wxyz: np.ndarray) -> Rotation:
-    w, x, y, z = quat_wxyz
-    return Rotation.from_euler("z", np.arctan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z)))
-
-
-def _rot(quat_wxyz: np.ndarray) -> Rotation:
-    return Rotation.from_quat(np.asarray(quat_wxyz)[..., [1, 2, 3, 0]])
-
-
-def _wxyz(r: Rotation) -> np.ndarray:
-    return r.as_quat()[..., [3, 0, 1, 2]]
-
-
-@dataclass
-class FootTargets:
-    """Per-frame foot body targets and where they are footsteps (``planted``: the IK holds them exactly)."""
-
-    pos: np.ndarray  # (T, 2, 3)
-    quat: np.ndarray  # (T, 2, 4) wxyz
-    planted: np.ndarray  # (T, 2) bool, a subset of the reference's stance
-
-
-def foot_targets(ref: Reference, sole_z: np.ndarray, tolerance: float = 0.02, clearance: float = 0.0) -> FootTargets:
-    """Footsteps in stance, the reference plus a blended footstep offset elsewhere (module docstring).
-
-    With ``clearance > 0`` a foot swinging between two footsteps (the reference's schedule) whose sole
-    never rises ``clearance`` above the floor is made level (its blended heading, no pitch or roll: the
-    tracker lands feet flat), with its sole at least ``clearance sin^2(pi s)`` above the floor (``s``:
-    0 -> 1 from the frame before the swing to the frame after it): a human's toe-off and heel-strike
-    swings keep the pitched G1 sole 0.5-2 cm off the floor, and a flat foot that low scuffs and lands
-    early. Swings that clear it are left as they are.
-
-    ``sole_z[k]``: the sole's height in foot ``k``'s body frame (negative), so a flat foot on the floor
-    has its origin at ``-sole_z``. A stance run's footstep holds over its **planted** frames: the
-    contiguous frames around the run's slowest one where the reference foot is within ``tolerance``
-    (horizontally) of the footstep. A stance run whose reference foot slides further (a low, fast
-    foot the schedule counts as support) is followed like a swing outside those frames.
-    """
-    T = ref.frames
-    pos, quat = ref.foot_pos.copy(), ref.foot_quat.copy()
-    planted = np.zeros((T, 2), bool)
-    dt = 1.0 / ref.fps
-    for k in range(2):
-        speed = np.linalg.norm(np.gradient(ref.foot_pos[:, k, :2], dt, axis=0), axis=-1) if T > 1 else np.zeros(T)
-        steps = []  # (first planted frame, stop, footstep position, footstep rotation)
-        for s, e in runs(ref.stance[:, k]):
-            i = s + int(np.argmin(speed[s:e]))
-            p = np.array([ref.foot_pos[i, k, 0], ref.foot_pos[i, k, 1], -sole_z[k]])
-            near = np.linalg.norm(ref.foot_pos[s:e, k, :2] - p[:2], axis=1) <= tolerance
-            a = i
-            while a > s and near[a - 1 - s]:
-                a -= 1
-            b = i + 1
-            while b < e and near[b - s]:
-                b += 1
-            r = _yaw_rotation(ref.foot_quat[i, k])
-            pos[a:b, k], quat[a:b, k], planted[a:b, k] = p, _wxyz(r), True
-            steps.append((a, b, p, r))
-        ref_rot = _rot(ref.foot_quat[:, k])
-        for before, after in zip([None, *steps], [*steps, None]):
-            a0, a1 = (before[1] if before else 0), (after[0] if after else T)
-            if a1 <= a0 or (before is None and after is None):
-                continue
-            frames = np.arange(a0, a1)
-            # footstep offsets at the last planted frame before and the first planted frame after
-            d0 = (
-                (before[2] - ref.foot_pos[a0 - 1, k], (before[3] * ref_rot[a0 - 1].inv()).as_rotvec())
-                if before
-                else None
-            )
-            d1 = (after[2] - ref.foot_pos[a1, k], (after[3] * ref_rot[a1].inv()).as_rotvec()) if after else None
-            d0, d1 = d0 or d1, d1 or d0
-            alpha = ((frames - (a0 - 1)) / (a1 - a0 + 1))[:, None]  # 0 at the last planted frame, 1 at the next
-            pos[frames, k] = ref.foot_pos[frames, k] + (1 - alpha) * d0[0] + alpha * d1[0]
-            quat[frames, k] = _wxyz(Rotation.from_rotvec((1 - alpha) * d0[1] + alpha * d1[1]) * ref_rot[frames])
-            if clearance > 0 and before is not None and after is not None:
-                for s, e in runs(~ref.stance[a0:a1, k]):  # the swings in between that stay low
-                    sw = np.arange(a0 + s, a0 + e)
-                    if ref.sole_height[sw, k].max() >= clearance:
-                        continue
-                    quat[sw, k] = [_wxyz(_yaw_rotation(q)) for q in quat[sw, k]]
-                    lift = clearance * np.sin(np.pi * (sw - (a0 + s - 1)) / (e - s + 1)) ** 2
-                    pos[sw, k, 2] = np.maximum(pos[sw, k, 2], -sole_z[k] + lift)
-    return FootTargets(pos, quat, planted)
-
-
 class ReferenceIK:
     """The differential IK of the module docstring on a compiled scene (robot = the model's first tree,
     ``qpos[:NQ_ROBOT]``; any further dofs, free objects, are frozen). Reusable across clips of one model."""
@@ -237,40 +123,7 @@ class ReferenceIK:
         self.config_limit = mink.ConfigurationLimit(model)
         self.knee_limit = MinimumJointLimit(model, {"left_knee_joint": cfg.min_knee, "right_knee_joint": cfg.min_knee})
         self.velocity_limit = FrameVelocityLimit(model, joint_velocity_limits(cfg.velocity_limit_factor), dt=1.0 / 50.0)
-        groups = self_collision_groups(model)
-        self.collision = (
-            [
-                SeparationLimit(
-                    model,
-                    groups,
-                    skip_kept_apart=True,
-                    gain=cfg.collision_gain,
-                    minimum_distance_from_collisions=cfg.self_min_distance,
-                    collision_detection_distance=cfg.collision_detection_distance,
-                )
-            ]
-            if cfg.self_collision
-            else []
-        )
-        robot_root = model.body("pelvis").id
-        object_geoms = [
-            g
-            for g in range(model.ngeom)
-            if model.geom_contype[g] and model.geom_bodyid[g] and model.body_rootid[model.geom_bodyid[g]] != robot_root
-        ]
-        self.object_limit = (
-            [
-                SeparationLimit(
-                    model,
-                    [(groups[0][0], object_geoms)],
-                    gain=cfg.collision_gain,
-                    minimum_distance_from_collisions=cfg.object_min_distance,
-                    collision_detection_distance=cfg.collision_detection_distance,
-                )
-            ]
-            if cfg.object_collision and object_geoms
-            else []
-        )
+        self.collision, self.object_limit = _collision_limits(model, cfg)
         self._objects_on = False
         self.freeze = [mink.DofFreezingTask(model, list(range(NV_ROBOT, model.nv)))] if model.nv > NV_ROBOT else []
         self._link_ids = [model.body(b).id for b in (*HAND_BODIES, "pelvis", "torso_link")]
@@ -348,7 +201,7 @@ class ReferenceIK:
         keeps out of them (``object_collision``), else they stay at ``qpos0`` and are ignored.
         ``hand_targets`` (T, 2, 3): hand body positions replacing the reference's (e.g. hands held on
         an object, :func:`physicalize.grasp.grasp_schedule`'s ``attached``)."""
-        cfg, m, c = self.cfg, self.model, self.configuration
+        cfg, c = self.cfg, self.configuration
         self._objects_on = objects is not None and bool(self.object_limit)
         T = ref.frames
         t0 = time.perf_counter()
@@ -357,16 +210,7 @@ class ReferenceIK:
         seat = None if ref.seat is None else self._reference_poses(ref.qpos, self.seat_ids)
         if hand_targets is not None:
             links[:, :2, 4:] = hand_targets[:T]
-        lo, hi = m.jnt_range[1:, 0], m.jnt_range[1:, 1]
-        hinge = np.array(
-            [int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_HINGE) and m.jnt_limited[j] for j in range(1, m.njnt)]
-        )
-        q = m.qpos0.copy()
-        q[:NQ_ROBOT] = ref.qpos[0]
-        if objects is not None:
-            q[NQ_ROBOT:] = objects[0]
-        adr = m.jnt_qposadr[1:][hinge]
-        q[adr] = np.clip(q[adr], lo[hinge], hi[hinge])  # the IK starts inside the limits
+        q = self._start_configuration(ref, objects)
         c.update(q)
         self.velocity_limit.dt = 1.0 / ref.fps
         self._relaxed = self._failed = 0
@@ -378,20 +222,7 @@ class ReferenceIK:
                 q[NQ_ROBOT:] = objects[t]
                 c.update(q)
             target_q[:NQ_ROBOT] = ref.qpos[t]
-            self.posture.set_target(target_q)
-            self.com.set_target(com_plan[t])
-            for task, pose in zip((*self.hands, self.pelvis, self.torso), links[t]):
-                task.set_target(mink.SE3(wxyz_xyz=pose))
-            tasks, stance = [self.com, *self.hands, self.pelvis, self.torso, self.posture], []
-            if (
-                seat is not None
-            ):  # sitting links stay where the reference sits them (the CoM plan leans the body over them instead)
-                for i in np.flatnonzero(np.isfinite(ref.seat[t, :, 0])):
-                    self.seat[i].set_target(mink.SE3(wxyz_xyz=seat[t, i]))
-                    tasks.append(self.seat[i])
-            for k, task in enumerate(self.feet):
-                task.set_target(mink.SE3(wxyz_xyz=np.concatenate([feet.quat[t, k], feet.pos[t, k]])))
-                (stance if feet.planted[t, k] else tasks).append(task)
+            tasks, stance = self._frame_tasks(ref, t, target_q, com_plan, links, seat, feet)
             if t == 0:
                 for _ in range(cfg.init_iterations):
                     self._step_free(tasks, stance)
@@ -412,6 +243,50 @@ class ReferenceIK:
         }
         return out
 
+    def _start_configuration(self, ref: Reference, objects: np.ndarray | None) -> np.ndarray:
+        """The first frame's configuration (the objects at their first pose), its hinges clipped into their
+        limits (the IK starts inside them)."""
+        m = self.model
+        lo, hi = m.jnt_range[1:, 0], m.jnt_range[1:, 1]
+        hinge = np.array(
+            [int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_HINGE) and m.jnt_limited[j] for j in range(1, m.njnt)]
+        )
+        q = m.qpos0.copy()
+        q[:NQ_ROBOT] = ref.qpos[0]
+        if objects is not None:
+            q[NQ_ROBOT:] = objects[0]
+        adr = m.jnt_qposadr[1:][hinge]
+        q[adr] = np.clip(q[adr], lo[hinge], hi[hinge])  # the IK starts inside the limits
+        return q
+
+    def _frame_tasks(
+        self,
+        ref: Reference,
+        t: int,
+        target_q: np.ndarray,
+        com_plan: np.ndarray,
+        links: np.ndarray,
+        seat: np.ndarray | None,
+        feet: FootTargets,
+    ) -> tuple[list, list]:
+        """``(tasks, stance tasks)`` of frame ``t`` with their targets set: the CoM plan, the hands', pelvis'
+        and torso's reference poses ``links``, the posture ``target_q``, the sitting links' reference poses
+        ``seat`` where the reference sits, the feet's targets (planted ones as stance tasks)."""
+        self.posture.set_target(target_q)
+        self.com.set_target(com_plan[t])
+        for task, pose in zip((*self.hands, self.pelvis, self.torso), links[t]):
+            task.set_target(mink.SE3(wxyz_xyz=pose))
+        tasks, stance = [self.com, *self.hands, self.pelvis, self.torso, self.posture], []
+        # sitting links stay where the reference sits them (the CoM plan leans the body over them instead)
+        if seat is not None:
+            for i in np.flatnonzero(np.isfinite(ref.seat[t, :, 0])):
+                self.seat[i].set_target(mink.SE3(wxyz_xyz=seat[t, i]))
+                tasks.append(self.seat[i])
+        for k, task in enumerate(self.feet):
+            task.set_target(mink.SE3(wxyz_xyz=np.concatenate([feet.quat[t, k], feet.pos[t, k]])))
+            (stance if feet.planted[t, k] else tasks).append(task)
+        return tasks, stance
+
     def _converged(self, stance_tasks: list) -> bool:
         """The CoM and every planted foot within ``tolerance`` of their targets."""
         c, tol = self.configuration, self.cfg.tolerance
@@ -429,6 +304,46 @@ class ReferenceIK:
             self._step(tasks, stance_tasks)
         finally:
             self.velocity_limit.dt = saved
+
+
+def _collision_limits(model: mujoco.MjModel, cfg: FeasibleConfig) -> tuple[list, list]:
+    """``(self-collision limits, robot-object limits)``: :class:`~pipeline.ik_limits.SeparationLimit` s as
+    configured (each an empty list when off; the second also without objects)."""
+    groups = self_collision_groups(model)
+    collision = (
+        [
+            SeparationLimit(
+                model,
+                groups,
+                skip_kept_apart=True,
+                gain=cfg.collision_gain,
+                minimum_distance_from_collisions=cfg.self_min_distance,
+                collision_detection_distance=cfg.collision_detection_distance,
+            )
+        ]
+        if cfg.self_collision
+        else []
+    )
+    robot_root = model.body("pelvis").id
+    object_geoms = [
+        g
+        for g in range(model.ngeom)
+        if model.geom_contype[g] and model.geom_bodyid[g] and model.body_rootid[model.geom_bodyid[g]] != robot_root
+    ]
+    object_limit = (
+        [
+            SeparationLimit(
+                model,
+                [(groups[0][0], object_geoms)],
+                gain=cfg.collision_gain,
+                minimum_distance_from_collisions=cfg.object_min_distance,
+                collision_detection_distance=cfg.collision_detection_distance,
+            )
+        ]
+        if cfg.object_collision and object_geoms
+        else []
+    )
+    return collision, object_limit
 
 
 def resolve_reference(

@@ -51,7 +51,7 @@ from tensordict import TensorDict
 
 from physicalize.problem import tracking_problem
 from physicalize.reference import Reference
-from physicalize.rollout import SUBSTEPS, fallen
+from physicalize.rollout import SUBSTEPS, fallen, initial_state
 from physicalize.wbc import WholeBodyController
 from pipeline.clip import RobotClip
 from pipeline.robot import (
@@ -61,19 +61,20 @@ from pipeline.robot import (
     JOINTS_QVEL,
     NQ_ROBOT,
     NUM_JOINTS,
-    NV_ROBOT,
     ROOT_ANG_VEL,
     ROOT_POS,
     ROOT_QUAT,
 )
 from pipeline.rotations import quat_mat
+from pipeline.terms.observations import rot6
 
 FORMAT = "lessmimic-residual-v1"
 
 
 @dataclass(frozen=True)
 class ResidualConfig:
-    """Action scale, observation, reward and PPO settings (all stored in the checkpoint)."""
+    """Action scale, observation, reward and PPO settings (all stored in the checkpoint; a checkpoint
+    written before a field existed loads with its default)."""
 
     scale: float = 0.05  # rad per unit of clipped policy output
     lookahead: tuple[int, ...] = (1, 2, 5, 10)  # reference frames ahead observed (besides the current one)
@@ -102,15 +103,17 @@ class ResidualConfig:
     gamma: float = 0.99
     lam: float = 0.95
     entropy_coef: float = 0.005
+    clip_param: float = 0.2
+    value_loss_coef: float = 1.0
+    max_grad_norm: float = 1.0
+    schedule: str = "adaptive"  # rsl-rl's learning-rate schedule (adapted to desired_kl)
+    desired_kl: float = 0.01
+    activation: str = "elu"  # of the actor's and the critic's MLPs
 
     @classmethod
     def from_dict(cls, d: dict) -> ResidualConfig:
         names = {f.name for f in fields(cls)}
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items() if k in names})
-
-
-def _rot6(R: np.ndarray) -> np.ndarray:
-    return R[:, :2].T.ravel()
 
 
 def observe(d: mujoco.MjData, ref: Reference, t: int, base_action: np.ndarray, cfg: ResidualConfig) -> np.ndarray:
@@ -123,25 +126,14 @@ def observe(d: mujoco.MjData, ref: Reference, t: int, base_action: np.ndarray, c
     parts = [q, d.qvel[JOINTS_QVEL], R.T @ np.array([0.0, 0.0, -1.0]), d.qvel[ROOT_ANG_VEL], p[2:3], base_action - q]
     for k in (0, *cfg.lookahead):
         r = ref.qpos[min(t + k, T - 1)]
-        parts += [r[JOINTS_QPOS], R.T @ (r[ROOT_POS] - p), _rot6(R.T @ quat_mat(r[ROOT_QUAT]))]
+        parts += [r[JOINTS_QPOS], R.T @ (r[ROOT_POS] - p), rot6(R.T @ quat_mat(r[ROOT_QUAT]))]
     if d.qpos.shape[0] >= NQ_ROBOT + FREE_NQ:
         o = d.qpos[NQ_ROBOT : NQ_ROBOT + FREE_NQ]
-        parts += [R.T @ (o[:3] - p), _rot6(R.T @ quat_mat(o[3:7])), np.ones(1)]
+        parts += [R.T @ (o[:3] - p), rot6(R.T @ quat_mat(o[3:7])), np.ones(1)]
     else:
         parts.append(np.zeros(10))
     parts += [np.array([t / max(T - 1, 1)]), ref.stance[t].astype(float)]
     return np.concatenate(parts).astype(np.float32)
-
-
-def start_state(scene, ref: Reference, objects: dict[str, np.ndarray], s: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(qpos, qvel)`` at reference frame ``s``: the reference pose, the median velocity of frames
-    ``s..s+4`` (as :func:`physicalize.rollout.initial_state` at ``s = 0``), objects at their pose, at rest."""
-    m = scene.model
-    qpos, qvel = np.zeros(m.nq), np.zeros(m.nv)
-    qpos[:NQ_ROBOT], qvel[:NV_ROBOT] = ref.qpos[s], np.median(ref.qvel[s : s + 5], axis=0)
-    for name, adr in scene.object_qpos_adr.items():
-        qpos[adr : adr + 7] = objects[name][s]
-    return qpos, qvel
 
 
 def _kernel(err: float, sigma: float) -> float:
@@ -152,7 +144,7 @@ def _actor_cfg(cfg: ResidualConfig) -> dict:
     return {
         "class_name": "MLPModel",
         "hidden_dims": list(cfg.hidden_dims),
-        "activation": "elu",
+        "activation": cfg.activation,
         "obs_normalization": True,
         "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": cfg.init_std, "std_type": "scalar"},
     }
@@ -193,7 +185,7 @@ class ResidualEnv(VecEnv):
     def _reset(self, i: int) -> np.ndarray:
         s = int(self.rng.integers(0, max(1, self.ref.frames - self.cfg.start_margin)))
         d = self.datas[i]
-        d.qpos[:], d.qvel[:] = start_state(self.scene, self.ref, self.objects, s)
+        d.qpos[:], d.qvel[:] = initial_state(self.scene, self.ref, self.objects, s)
         d.ctrl[:] = 0.0
         mujoco.mj_forward(self.model, d)
         self.t[i] = self.start[i] = s
@@ -275,11 +267,11 @@ def _train_cfg(cfg: ResidualConfig) -> dict:
             "gamma": cfg.gamma,
             "lam": cfg.lam,
             "entropy_coef": cfg.entropy_coef,
-            "clip_param": 0.2,
-            "value_loss_coef": 1.0,
-            "max_grad_norm": 1.0,
-            "schedule": "adaptive",
-            "desired_kl": 0.01,
+            "clip_param": cfg.clip_param,
+            "value_loss_coef": cfg.value_loss_coef,
+            "max_grad_norm": cfg.max_grad_norm,
+            "schedule": cfg.schedule,
+            "desired_kl": cfg.desired_kl,
             "rnd_cfg": None,
             "symmetry_cfg": None,
         },
@@ -287,7 +279,7 @@ def _train_cfg(cfg: ResidualConfig) -> dict:
         "critic": {
             "class_name": "MLPModel",
             "hidden_dims": list(cfg.hidden_dims),
-            "activation": "elu",
+            "activation": cfg.activation,
             "obs_normalization": True,
         },
     }

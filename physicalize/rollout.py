@@ -20,10 +20,11 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from physicalize.contacts import ContactSets, robot_contacts
 from physicalize.reference import Reference
 from physicalize.stepping import foot_floor_forces
 from physicalize.wbc import WholeBodyController
-from pipeline.robot import FOOT_BODIES, NQ_ROBOT, NUM_JOINTS, NV_ROBOT
+from pipeline.robot import NQ_ROBOT, NUM_JOINTS, NV_ROBOT
 from pipeline.rotations import quat_mat
 from pipeline.scene import Scene, link_collision_geoms
 
@@ -55,15 +56,17 @@ class Rollout:
         return self.qpos.shape[0]
 
 
-def initial_state(scene: Scene, ref: Reference, objects: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """``(qpos, qvel)``: the reference's first frame, its velocity (the median over the first 5 frames:
-    a retargeted clip's first frame is solved on its own and its finite difference can jump), objects
-    at their first pose, at rest."""
+def initial_state(
+    scene: Scene, ref: Reference, objects: dict[str, np.ndarray], frame: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(qpos, qvel)`` at reference frame ``frame`` (default the first): the reference pose, its velocity
+    (the median over frames ``frame..frame+4``: a retargeted clip's first frame is solved on its own and
+    its finite difference can jump), objects at their pose, at rest."""
     m = scene.model
     qpos, qvel = np.zeros(m.nq), np.zeros(m.nv)
-    qpos[:NQ_ROBOT], qvel[:NV_ROBOT] = ref.qpos[0], np.median(ref.qvel[:5], axis=0)
+    qpos[:NQ_ROBOT], qvel[:NV_ROBOT] = ref.qpos[frame], np.median(ref.qvel[frame : frame + 5], axis=0)
     for name, adr in scene.object_qpos_adr.items():
-        qpos[adr : adr + 7] = objects[name][0]
+        qpos[adr : adr + 7] = objects[name][frame]
     return qpos, qvel
 
 
@@ -77,13 +80,12 @@ def fallen(d: mujoco.MjData, ref_pelvis_z: float, torso: int, ref_torso_quat: np
 
 
 def _link_contacts(m, d, link_geoms: list[set[int]], object_geoms: set[int]) -> np.ndarray:
+    """(len(link_geoms),) bool: each link (its geoms) touches an object (one of ``object_geoms``)."""
     out = np.zeros(len(link_geoms), bool)
-    for i in range(d.ncon):
-        c = d.contact[i]
-        pair = {c.geom1, c.geom2}
-        if pair & object_geoms:
+    for c in robot_contacts(m, d, set().union(*link_geoms)):
+        if c.other in object_geoms:
             for k, g in enumerate(link_geoms):
-                if pair & g:
+                if c.geom in g:
                     out[k] = True
     return out
 
@@ -106,8 +108,7 @@ def simulate(
     m = scene.model
     d = mujoco.MjData(m)
     d.qpos[:], d.qvel[:] = qpos0, qvel0
-    feet = [m.body(b).id for b in FOOT_BODIES]
-    floor, torso = m.geom("floor").id, m.body("torso_link").id
+    robot, torso = ContactSets.of(m), m.body("torso_link").id
     link_geoms = [set(link_collision_geoms(m, b)) for b in contact_links]
     object_geoms = {g for g in range(m.ngeom) if m.geom_bodyid[g] in set(scene.object_body_id.values())}
     T = ref.frames
@@ -120,7 +121,7 @@ def simulate(
         mujoco.mj_forward(m, d)
         rec["qpos"].append(d.qpos.copy())
         rec["qvel"].append(d.qvel.copy())
-        rec["foot_force"].append(foot_floor_forces(m, d, feet, floor))
+        rec["foot_force"].append(foot_floor_forces(robot, d))
         rec["contact"].append(_link_contacts(m, d, link_geoms, object_geoms))
         sol = controller.solve(d, ref.target(t))
         fails += not sol.ok

@@ -23,18 +23,15 @@ body's contacts, with a 3-D force ``f`` in the friction pyramid about the mean n
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
 
-from pipeline.foot_contact import keep_runs, runs
+from physicalize.contacts import ContactSets, robot_contacts
+from physicalize.reference import Reference
+from pipeline.foot_contact import keep_runs, widen_runs
 from pipeline.robot import NQ_ROBOT, NV_ROBOT
 from pipeline.scene import nearest_geom_pair
-
-if TYPE_CHECKING:
-    from physicalize.reference import Reference
-    from physicalize.wbc import WholeBodyController
 
 SUPPORT_NORMAL_Z = np.cos(np.pi / 4)  # a contact whose normal is this close to vertical supports from below
 SEAT_LINKS = (
@@ -87,8 +84,7 @@ def seat_support(
     T = ref.frames
     label = np.asarray(contacts[:T, list(contact_links).index("pelvis")], bool)
     seated = keep_runs(keep_runs(label, cfg.min_run, True), cfg.min_run, False)
-    for a, b in runs(seated.copy()):
-        seated[max(0, a - cfg.dilate) : b + cfg.dilate] = True
+    seated = widen_runs(seated, cfg.dilate)
     if not seated.any():
         return None
     links = [
@@ -119,28 +115,19 @@ def seat_support(
     return out if np.isfinite(out).any() else None
 
 
-def support_points(ctrl: WholeBodyController, d: mujoco.MjData, exclude: set[int]) -> list[SupportPoint]:
+def support_points(robot: ContactSets, d: mujoco.MjData, exclude: set[int]) -> list[SupportPoint]:
     """The seat contact points (see the module docstring) of the current state, one per robot body that
     an object supports from below; robot geoms in ``exclude`` (the feet, the grip links) are left out."""
-    m = ctrl.m
+    m = robot.model
     acc: dict[int, list] = {}
-    f6 = np.zeros(6)
-    for i in range(d.ncon):
-        c = d.contact[i]
-        g1, g2 = c.geom1, c.geom2
-        r1, r2 = g1 in ctrl.robot_geoms, g2 in ctrl.robot_geoms
-        if r1 == r2 or ctrl.floor in (g1, g2):
+    for c in robot_contacts(m, d, robot.robot_geoms):
+        if c.other == robot.floor or c.geom in exclude:
             continue
-        rg = g1 if r1 else g2
-        if rg in exclude:
-            continue
-        n = c.frame[:3] * (1.0 if rg == g2 else -1.0)  # the contact normal points from geom1 to geom2: into the robot
+        n = c.normal  # the contact normal points from geom1 to geom2: here into the robot
         if n[2] < SUPPORT_NORMAL_Z:
             continue
-        mujoco.mj_contactForce(m, d, i, f6)
-        f = c.frame.reshape(3, 3).T @ f6[:3]
-        f = f if rg == g2 else -f
-        body = int(m.geom_bodyid[rg])
+        f = c.force()
+        body = int(m.geom_bodyid[c.geom])
         jp = np.zeros((3, m.nv))
         mujoco.mj_jac(m, d, jp, None, c.pos, body)
         entry = acc.setdefault(body, [np.zeros(3), np.zeros(3), 0, np.zeros(jp.shape[1])])

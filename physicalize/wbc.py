@@ -26,9 +26,10 @@ of running ahead and pushing the robot off its feet).
 
 Support comes from the schedule corrected by the simulation's contacts, and the swing foot lands
 where the divergent component of motion ``xi = c + c_dot / omega`` can be caught
-(:meth:`physicalize.stepping.Stepping.adapt`:
-late and early touchdowns, capture-point step adjustment, the CoM target following the footholds
-taken); off while a seat or an object carries part of the weight.
+(:meth:`physicalize.stepping.Stepping.adapt`: late and early touchdowns, capture-point step adjustment,
+the CoM target following the footholds taken); off while a seat or an object carries part of the weight.
+The QP's rows are assembled in :mod:`physicalize.wbc_qp` (cost, equalities, friction and torque bounds)
+and :mod:`physicalize.wbc_rows` (soft rows).
 
 The joint torques ``tau = M_a qdd + h_a - J_{c,a}^T f - tau_ext,a`` become PD position targets held
 for the control period ``T`` (4 physics steps): ``q* = q_m + (tau + k_d qd_m) / k_p`` at the
@@ -43,11 +44,21 @@ import numpy as np
 from qpsolvers import solve_qp
 
 from physicalize import seat, wbc_rows
+from physicalize.contacts import ContactSets, robot_contacts
+from physicalize.seat import SupportPoint
 from physicalize.stepping import Stepping
 from physicalize.target import Solution, Target
 from physicalize.wbc_config import WBCConfig
+from physicalize.wbc_qp import (
+    UP_FRAME,
+    Costs,
+    equality_rows,
+    friction_rows,
+    seated_load_rows,
+    torque_map,
+    with_slack,
+)
 from pipeline.robot import (
-    FOOT_BODIES,
     G1_JOINT_NAMES,
     HAND_BODIES,
     JOINTS_QPOS,
@@ -55,7 +66,6 @@ from pipeline.robot import (
     NUM_JOINTS,
     NV_ROBOT,
     ActuatorProfile,
-    sole_corners,
 )
 from pipeline.rotations import orientation_error, quat_mat
 from pipeline.scene import link_collision_geoms
@@ -69,30 +79,30 @@ GRIP_LINKS = (
 CONTROL_DT = 0.02
 CLEAR_LINKS = ("hip_roll", "hip_yaw", "knee", "ankle_pitch")  # leg links whose contact with an object is never planned
 
+ComState = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # (c, J_com, Jdot_com qd, c_dot)
+
 
 class WholeBodyController:
     """The QP above on a compiled scene (the robot must be the model's first tree: dofs 0..34)."""
 
     def __init__(self, model: mujoco.MjModel, profile: ActuatorProfile, config: WBCConfig = WBCConfig()):
         self.m, self.profile, self.cfg = model, profile, config
+        self.contacts = ContactSets.of(model)  # what the seat and stepping helpers know of the robot
         self.pelvis, self.torso = model.body("pelvis").id, model.body("torso_link").id
-        self.feet = [model.body(b).id for b in FOOT_BODIES]
+        self.feet, self.corners, self.floor = self.contacts.feet, self.contacts.corners, self.contacts.floor
         self.hands = [model.body(b).id for b in HAND_BODIES]
         self.grip_geoms = [
             {g for link in GRIP_LINKS for g in link_collision_geoms(model, f"{side}_{link}")}
             for side in ("left", "right")
         ]
-        self.corners = np.stack([sole_corners(model, b) for b in FOOT_BODIES])
-        self.robot_bodies = [b for b in range(1, model.nbody) if model.body_rootid[b] == self.pelvis]
+        self.robot_bodies, self.robot_geoms = self.contacts.bodies, self.contacts.robot_geoms
         self.robot_mass = float(sum(model.body_mass[b] for b in self.robot_bodies))
-        self.robot_geoms = {g for g in range(model.ngeom) if model.geom_bodyid[g] in set(self.robot_bodies)}
-        self.floor = model.geom("floor").id
-        self.unseated_geoms = {g for g in self.robot_geoms if model.geom_bodyid[g] in self.feet} | set().union(
-            *self.grip_geoms
-        )  # never seat contacts
+        own = sorted(self.robot_geoms)  # in id order: the order of the clearance rows
+        # never seat contacts
+        self.unseated_geoms = {g for g in own if model.geom_bodyid[g] in self.feet} | set().union(*self.grip_geoms)
         legs = [
             g
-            for g in self.robot_geoms
+            for g in own
             if model.geom_contype[g] and any(k in model.body(model.geom_bodyid[g]).name for k in CLEAR_LINKS)
         ]
         objects = [
@@ -106,7 +116,6 @@ class WholeBodyController:
         self.q_lo, self.q_hi = model.jnt_range[[model.joint(j).id for j in G1_JOINT_NAMES]].T.copy()
         self._M = np.zeros((model.nv, model.nv))
         self.stepping = Stepping(CONTROL_DT)  # capture-point shift of each foot's last landing (controller state)
-        self._jp, self._jr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
 
     # --- kinematics helpers ---------------------------------------------------------------------
     def _jac(self, d, body: int, point: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -118,7 +127,7 @@ class WholeBodyController:
         qd = d.qvel
         return jp[:, :NV_ROBOT], jr[:, :NV_ROBOT], dp @ qd, dr @ qd
 
-    def com(self, d) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def com(self, d) -> ComState:
         """(c, J_com, Jdot_com qd, c_dot) of the robot (requires mj_forward's position/velocity stages)."""
         J = np.zeros((3, self.m.nv))
         mujoco.mj_jacSubtreeCom(self.m, d, J, self.pelvis)
@@ -134,63 +143,87 @@ class WholeBodyController:
         """Generalized force (35,) on the robot from every contact except its own feet on the floor
         and its self-collisions (objects, seats, other links on the floor), measured in the simulation;
         only those of ``robot_geoms`` with ``other_body`` when given."""
-        tau = np.zeros(NV_ROBOT)
-        f6 = np.zeros(6)
-        for i in range(d.ncon):
-            c = d.contact[i]
-            g1, g2 = c.geom1, c.geom2
-            r1, r2 = g1 in self.robot_geoms, g2 in self.robot_geoms
-            if r1 == r2:
+        m, tau = self.m, np.zeros(NV_ROBOT)
+        for c in robot_contacts(m, d, self.robot_geoms):
+            if c.other == self.floor and m.geom_bodyid[c.geom] in self.feet:
                 continue
-            rg, other = (g1, g2) if r1 else (g2, g1)
-            if other == self.floor and self.m.geom_bodyid[rg] in self.feet:
+            if other_body is not None and (c.geom not in robot_geoms or m.geom_bodyid[c.other] != other_body):
                 continue
-            if other_body is not None and (rg not in robot_geoms or self.m.geom_bodyid[other] != other_body):
-                continue
-            mujoco.mj_contactForce(self.m, d, i, f6)
-            f = c.frame.reshape(3, 3).T @ f6[:3]  # on geom2, world frame
-            f = f if rg == g2 else -f
-            jp = np.zeros((3, self.m.nv))
-            mujoco.mj_jac(self.m, d, jp, None, c.pos, self.m.geom_bodyid[rg])
+            f = c.force()
+            jp = np.zeros((3, m.nv))
+            mujoco.mj_jac(m, d, jp, None, c.pos, m.geom_bodyid[c.geom])
             tau += jp[:, :NV_ROBOT].T @ f
         return tau
 
     # --- the QP ---------------------------------------------------------------------------------
     def solve(self, d, target: Target) -> Solution:
-        """One control step from the current state ``d`` (after ``mj_forward``)."""
-        m, cfg = self.m, self.cfg
-        nv = NV_ROBOT
-        tau_ext = self.external_forces(d)
-        supported = tau_ext[2] > cfg.other_support * self.robot_mass * 9.81  # sitting, leaning: no stepping logic
-        target = self.stepping.adapt(self, d, target) if cfg.contact_stance and not supported else target
+        """One control step from the current state ``d`` (after ``mj_forward``): the tasks' cost in the
+        order below (the sums' order fixes the solution's last bits), the rows, the QP, and the posture
+        PD with gravity compensation of the current state where the QP has no solution."""
+        cfg, nv = self.cfg, NV_ROBOT
+        com = self.com(d)
+        target, tau_ext, seats = self._support(d, target, com)
         stance = [k for k in range(2) if target.stance[k]]
-        seats = seat.support_points(self, d, self.unseated_geoms) if target.seated else []
+        qd = d.qvel[:nv]
+        mujoco.mj_fullM(self.m, d, self._M)
+        M, h = self._M[:nv, :nv], d.qfrc_bias[:nv] - d.qfrc_passive[:nv]
+        cost = Costs(nv, 12 * len(stance) + 3 * len(seats))
+        self._com_task(cost, target, com)
+        self._orientation_tasks(cost, d, target, qd)
+        feet = self._foot_tasks(cost, d, target, qd)
+        tau_ext = self._hand_tasks(cost, d, target, qd, tau_ext)
+        self._posture_task(cost, d, target, qd)
+        cost.regularize(cfg.w_qdd, cfg.w_force)
+        Jc = self._contact_jacobians(cost, d, stance, seats, qd)
+        A, b = equality_rows(M, h, tau_ext, Jc, [feet[k] for k in stance], cost.nf)
+        G, hv = friction_rows([UP_FRAME] * (4 * len(stance)) + [sp.frame for sp in seats], cfg.mu, nv, cost.n)
+        if seats and cfg.seated_foot_load > 0:  # seated, each stance foot still carries a share of the weight
+            Gf, hf = seated_load_rows(len(stance), nv, cost.n, cfg.seated_foot_load * self.robot_mass * 9.81)
+            G, hv = G + [Gf], hv + [hf]
+        Tq, ta = torque_map(M, h, tau_ext, Jc)  # tau = Tq x + ta
+        G += [Tq, -Tq]
+        hv += [cfg.effort_scale * self.effort - ta, cfg.effort_scale * self.effort + ta]
+        Gs, hs = wbc_rows.soft_rows(self, d, target, stance)
+        P, q, G, hv, A = with_slack(cost, np.vstack(G), np.concatenate(hv), A, Gs, hs, cfg.w_limit_slack)
+        x = solve_qp(P, q, G, hv, A, b, solver="daqp")
+        ok = x is not None
+        x = x[: cost.n] if ok else self._fallback(d, target, cost.n)
+        qdd, f = x[:nv], x[nv:]
+        tau = np.clip(Tq @ x + ta, -self.effort, self.effort)
+        return Solution(qdd, f.reshape(-1, 3), tau, self.action(d, qdd, tau), ok)
+
+    def _support(self, d, target: Target, com: ComState) -> tuple[Target, np.ndarray, list[SupportPoint]]:
+        """``(target, tau_ext, seats)``: the target with the stepping logic's support and footholds (unless
+        other contacts carry ``other_support`` of the weight: sitting, leaning), the measured external
+        generalized force and the seat's support points, whose measured contacts leave ``tau_ext``."""
+        tau_ext = self.external_forces(d)
+        supported = tau_ext[2] > self.cfg.other_support * self.robot_mass * 9.81  # sitting, leaning: no stepping logic
+        if not supported:
+            target = self.stepping.adapt(self.contacts, self.cfg, d, target, com[0], com[3])
+        seats = seat.support_points(self.contacts, d, self.unseated_geoms) if target.seated else []
         for sp in seats:  # the QP chooses the seat's force (it is no longer a measured given)
             tau_ext = tau_ext - sp.tau
-        nf = 12 * len(stance) + 3 * len(seats)
-        n = nv + nf
-        qd = d.qvel[:nv]
-        mujoco.mj_fullM(m, d, self._M)
-        M = self._M[:nv, :nv]
-        h = d.qfrc_bias[:nv] - d.qfrc_passive[:nv]
+        return target, tau_ext, seats
 
-        P = np.zeros((n, n))
-        q = np.zeros(n)
-
-        def task(J: np.ndarray, b: np.ndarray, w) -> None:
-            w = np.broadcast_to(np.asarray(w, dtype=float), b.shape)[:, None]
-            P[:nv, :nv] += J.T @ (w * J)
-            q[:nv] -= J.T @ (w[:, 0] * b)
-
-        c, Jc, bc, cd = self.com(d)
+    def _com_task(self, cost: Costs, target: Target, com: ComState) -> None:
+        """``c_dd* = c_dd_ref + k_p (c_ref - c) + k_d (c_dot_ref - c_dot)``, per world axis."""
+        cfg, (c, Jc, bc, cd) = self.cfg, com
         kp, kd = np.array(cfg.com_kp), np.array(cfg.com_kd)
-        task(Jc, target.com_acc + kp * (target.com - c) + kd * (target.com_vel - cd) - bc, cfg.w_com)
+        cost.task(Jc, target.com_acc + kp * (target.com - c) + kd * (target.com_vel - cd) - bc, cfg.w_com)
+
+    def _orientation_tasks(self, cost: Costs, d, target: Target, qd: np.ndarray) -> None:
+        """Pelvis and torso: ``w_dot* = k_p log(R_ref R^T) - k_d w``."""
+        cfg = self.cfg
         for body, w, bid in ((self.pelvis, cfg.w_pelvis, 0), (self.torso, cfg.w_torso, 1)):
             Rref = self._ref_rotation(target, bid)
             _, Jr, _, br = self._jac(d, body, d.xpos[body])
             err = orientation_error(Rref, d.xmat[body].reshape(3, 3))
-            task(Jr, cfg.orient_kp * err - cfg.orient_kd * (Jr @ qd) - br, w)
-        Jfeet = {}
+            cost.task(Jr, cfg.orient_kp * err - cfg.orient_kd * (Jr @ qd) - br, w)
+
+    def _foot_tasks(self, cost: Costs, d, target: Target, qd: np.ndarray) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """Swing feet's pose tasks (PD with the reference's feed-forward); returns each stance foot's
+        equality row ``(J (6, 35), a* - Jdot qd)`` with ``a* = -k_v v - k_p [0; roll/pitch error]``."""
+        cfg, stance_rows = self.cfg, {}
         for k in range(2):
             fb = self.feet[k]
             Jp, Jr, bp, br = self._jac(d, fb, d.xpos[fb])
@@ -198,131 +231,98 @@ class WholeBodyController:
             v6 = J6 @ qd
             R = d.xmat[fb].reshape(3, 3)
             if target.stance[k]:
-                flat = _flat_of(R)
                 a = -cfg.stance_kv * v6
-                a[3:] += cfg.stance_flat_kp * orientation_error(flat, R)
-                Jfeet[k] = (J6, a - b6)
+                a[3:] += cfg.stance_flat_kp * orientation_error(_flat_of(R), R)
+                stance_rows[k] = (J6, a - b6)
             else:
                 ep = target.foot_pos[k] - d.xpos[fb]
                 er = orientation_error(quat_mat(target.foot_quat[k]), R)
                 a = np.concatenate(
                     [
-                        cfg.swing_ff * target.foot_acc[k]
-                        + cfg.foot_kp * ep
-                        + cfg.foot_kd * (target.foot_vel[k] - v6[:3]),
+                        target.foot_acc[k] + cfg.foot_kp * ep + cfg.foot_kd * (target.foot_vel[k] - v6[:3]),
                         cfg.orient_kp * er - cfg.orient_kd * v6[3:],
                     ]
                 )
-                task(J6, a - b6, cfg.w_swing)
-        if target.hand_pos is not None:  # hand point tasks; a held object's planned reaction -J^T f in tau_ext
-            z3 = np.zeros((2, 3))
-            off = z3 if target.hand_offset is None else target.hand_offset
-            hv = z3 if target.hand_vel is None else target.hand_vel
-            ha = z3 if target.hand_acc is None else target.hand_acc
-            for k in range(2):
-                hb = self.hands[k]
-                p = d.xpos[hb] + d.xmat[hb].reshape(3, 3) @ off[k]
-                Jp, Jr, bp, br = self._jac(d, hb, p)
-                goal = target.hand_pos[k]
-                holding = target.hand_hold_body is not None and target.hand_hold_body[k] >= 0
-                kp, kd = (cfg.hold_kp, cfg.hold_kd) if holding else (cfg.hand_kp, cfg.hand_kd)
-                if holding:  # follow a lagging object, pull it back at most hand_lead
-                    dev = d.xpos[int(target.hand_hold_body[k])] - target.hand_hold_ref[k]
-                    nd = float(np.linalg.norm(dev))
-                    if nd > cfg.hand_lead:
-                        goal = goal + dev * (1.0 - cfg.hand_lead / nd)
-                a = ha[k] + kp * (goal - p) + kd * (hv[k] - Jp @ qd)
-                task(Jp, a - bp, cfg.w_hand if target.hand_weight is None else float(target.hand_weight[k]))
-                if target.hand_rot is not None and target.hand_rot_weight[k] > 0:
-                    err = orientation_error(target.hand_rot[k], d.xmat[hb].reshape(3, 3))
-                    task(Jr, cfg.orient_kp * err - cfg.orient_kd * (Jr @ qd) - br, float(target.hand_rot_weight[k]))
-                if target.hand_force is not None:
-                    if target.hand_object is not None and target.hand_object[k] >= 0:
-                        tau_ext = tau_ext - self.external_forces(d, self.grip_geoms[k], int(target.hand_object[k]))
-                    tau_ext = tau_ext - Jp.T @ target.hand_force[k]
+                cost.task(J6, a - b6, cfg.w_swing)
+        return stance_rows
+
+    def _hand_tasks(self, cost: Costs, d, target: Target, qd: np.ndarray, tau_ext: np.ndarray) -> np.ndarray:
+        """Hand point (and orientation) tasks; returns ``tau_ext`` with each holding hand's planned reaction
+        ``-J^T f`` in place of the held object's measured contacts on that forearm."""
+        if target.hand_pos is None:
+            return tau_ext
+        cfg, z3 = self.cfg, np.zeros((2, 3))
+        off = z3 if target.hand_offset is None else target.hand_offset
+        hv = z3 if target.hand_vel is None else target.hand_vel
+        ha = z3 if target.hand_acc is None else target.hand_acc
+        for k in range(2):
+            hb = self.hands[k]
+            p = d.xpos[hb] + d.xmat[hb].reshape(3, 3) @ off[k]
+            Jp, Jr, bp, br = self._jac(d, hb, p)
+            goal, kp, kd = self._hand_goal(d, target, k)
+            a = ha[k] + kp * (goal - p) + kd * (hv[k] - Jp @ qd)
+            cost.task(Jp, a - bp, cfg.w_hand if target.hand_weight is None else float(target.hand_weight[k]))
+            if target.hand_rot is not None and target.hand_rot_weight[k] > 0:
+                err = orientation_error(target.hand_rot[k], d.xmat[hb].reshape(3, 3))
+                cost.task(Jr, cfg.orient_kp * err - cfg.orient_kd * (Jr @ qd) - br, float(target.hand_rot_weight[k]))
+            if target.hand_force is not None:
+                if target.hand_object is not None and target.hand_object[k] >= 0:
+                    tau_ext = tau_ext - self.external_forces(d, self.grip_geoms[k], int(target.hand_object[k]))
+                tau_ext = tau_ext - Jp.T @ target.hand_force[k]
+        return tau_ext
+
+    def _hand_goal(self, d, target: Target, k: int) -> tuple[np.ndarray, float, float]:
+        """``(goal, k_p, k_d)`` of hand ``k``: a holding hand follows a lagging object (pulling it back at most
+        ``hand_lead``) with the holding gains."""
+        cfg, goal = self.cfg, target.hand_pos[k]
+        holding = target.hand_hold_body is not None and target.hand_hold_body[k] >= 0
+        if not holding:
+            return goal, cfg.hand_kp, cfg.hand_kd
+        dev = d.xpos[int(target.hand_hold_body[k])] - target.hand_hold_ref[k]
+        nd = float(np.linalg.norm(dev))
+        if nd > cfg.hand_lead:
+            goal = goal + dev * (1.0 - cfg.hand_lead / nd)
+        return goal, cfg.hold_kp, cfg.hold_kd
+
+    def _posture_task(self, cost: Costs, d, target: Target, qd: np.ndarray) -> None:
+        """Joint PD towards the reference posture, with its acceleration as feed-forward."""
+        cfg, nv = self.cfg, NV_ROBOT
         qj, qdj = d.qpos[JOINTS_QPOS], qd[JOINTS_QVEL]
         Jq = np.zeros((NUM_JOINTS, nv))
         Jq[:, JOINTS_QVEL] = np.eye(NUM_JOINTS)
-        task(
+        cost.task(
             Jq,
             target.qacc[JOINTS_QVEL]
             + cfg.posture_kp * (target.qpos[JOINTS_QPOS] - qj)
             + cfg.posture_kd * (target.qvel[JOINTS_QVEL] - qdj),
             cfg.w_posture,
         )
-        P[:nv, :nv] += cfg.w_qdd * np.eye(nv)
-        P[nv:, nv:] += cfg.w_force * np.eye(nf)
 
-        Jc = [
-            np.zeros((0, nv))
-        ]  # contact point Jacobians (world frame): the stance feet's sole corners, then the seat's points
+    def _contact_jacobians(
+        self, cost: Costs, d, stance: list[int], seats: list[SupportPoint], qd: np.ndarray
+    ) -> np.ndarray:
+        """(n_points, 35) world-frame Jacobians of the contact points: the stance feet's sole corners, then
+        the seat's points. A seat point is held like a stance foot, softly (its task added here; held hard
+        with the feet and the torque bounds, the QP was infeasible)."""
+        cfg, Jc = self.cfg, [np.zeros((0, NV_ROBOT))]
         for k in stance:
             fb = self.feet[k]
             R = d.xmat[fb].reshape(3, 3)
             for p in self.corners[k]:
                 Jc.append(self._jac(d, fb, d.xpos[fb] + R @ p)[0])
-        A, b = [], []
-        for k in stance:
-            A.append(np.hstack([Jfeet[k][0], np.zeros((6, nf))]))
-            b.append(Jfeet[k][1])
-        # a seat's support point is held like a stance foot, softly (held hard with the feet and the torque bounds, the
-        # QP was infeasible)
         for sp in seats:
             jp, _, bp, _ = self._jac(d, sp.body, sp.point)
             Jc.append(jp)
-            task(jp, -cfg.stance_kv * (jp @ qd) - bp, cfg.w_seat)
-        Jc = np.vstack(Jc)
-        A, b = np.vstack([np.hstack([M[:6], -Jc[:, :6].T])] + A), np.concatenate([-h[:6] + tau_ext[:6]] + b)
-        mu = cfg.mu / np.sqrt(2.0)  # the pyramid inscribed in the cone: |f_t| <= mu f_n in every direction
-        frames = [np.array([[0, 0, 1.0], [1, 0, 0], [0, 1, 0]])] * (4 * len(stance)) + [sp.frame for sp in seats]
-        G, hv = [], []
-        if frames:
-            Gc = np.zeros((5 * len(frames), n))
-            for j, (fn, t1, t2) in enumerate(frames):
-                Gc[5 * j : 5 * j + 5, nv + 3 * j : nv + 3 * j + 3] = [
-                    t1 - mu * fn,
-                    -t1 - mu * fn,
-                    t2 - mu * fn,
-                    -t2 - mu * fn,
-                    -fn,
-                ]
-            G.append(Gc)
-            hv.append(np.zeros(5 * len(frames)))
-        if (
-            seats and cfg.seated_foot_load > 0
-        ):  # seated, each stance foot still carries a share of the weight (else the robot tipped back, feet in the air)
-            Gf = np.zeros((len(stance), n))
-            for s in range(len(stance)):
-                Gf[s, nv + 12 * s + 2 : nv + 12 * s + 12 : 3] = -1.0
-            G.append(Gf)
-            hv.append(np.full(len(stance), -cfg.seated_foot_load * self.robot_mass * 9.81))
-        Tq = np.hstack([M[JOINTS_QVEL], -Jc[:, JOINTS_QVEL].T])  # tau = Tq x + h_a - tau_ext_a
-        ta = h[JOINTS_QVEL] - tau_ext[JOINTS_QVEL]
-        G += [Tq, -Tq]
-        hv += [cfg.effort_scale * self.effort - ta, cfg.effort_scale * self.effort + ta]
-        G, hv = np.vstack(G), np.concatenate(hv)
-        Gs, hs = wbc_rows.soft_rows(self, d, target, stance)
-        ns = len(hs)
-        if ns:  # soft rows  Gs qdd - s <= hs  with slack s >= 0 (weight w_limit_slack): the QP stays feasible
-            Gl = np.zeros((2 * ns, n + ns))
-            Gl[:ns, :nv] = Gs
-            Gl[:ns, n:] = -np.eye(ns)
-            Gl[ns:, n:] = -np.eye(ns)
-            G = np.vstack([np.hstack([G, np.zeros((G.shape[0], ns))]), Gl])
-            hv = np.concatenate([hv, hs, np.zeros(ns)])
-            P = np.block([[P, np.zeros((n, ns))], [np.zeros((ns, n)), cfg.w_limit_slack * np.eye(ns)]])
-            q = np.concatenate([q, np.zeros(ns)])
-            A = np.hstack([A, np.zeros((A.shape[0], ns))])
-        x = solve_qp(P, q, G, hv, A, b, solver="daqp")
-        ok = x is not None
-        if ok:
-            x = x[:n]
-        if not ok:  # fall back to the posture PD with gravity compensation of the current state
-            x = np.zeros(n)
-            x[JOINTS_QVEL] = cfg.posture_kp * (target.qpos[JOINTS_QPOS] - qj) - cfg.posture_kd * qdj
-        qdd, f = x[:nv], x[nv:]
-        tau = np.clip(Tq @ x + ta, -self.effort, self.effort)
-        return Solution(qdd, f.reshape(-1, 3), tau, self.action(d, qdd, tau), ok)
+            cost.task(jp, -cfg.stance_kv * (jp @ qd) - bp, cfg.w_seat)
+        return np.vstack(Jc)
+
+    def _fallback(self, d, target: Target, n: int) -> np.ndarray:
+        """``x`` when the QP has no solution: the posture PD (with gravity compensation of the current state
+        through the torque map), no contact force."""
+        x = np.zeros(n)
+        qj, qdj = d.qpos[JOINTS_QPOS], d.qvel[:NV_ROBOT][JOINTS_QVEL]
+        x[JOINTS_QVEL] = self.cfg.posture_kp * (target.qpos[JOINTS_QPOS] - qj) - self.cfg.posture_kd * qdj
+        return x
 
     @staticmethod
     def _ref_rotation(target: Target, which: int) -> np.ndarray:

@@ -26,7 +26,6 @@ class WBCConfig:
     hold_kd: float = 35.0
     posture_kp: float = 100.0
     posture_kd: float = 20.0
-    swing_ff: float = 1.0  # feed-forward of the reference swing-foot acceleration
     stance_kv: float = 20.0
     stance_flat_kp: float = 100.0
     w_com: tuple[float, float, float] = (1000.0, 1000.0, 1000.0)  # per world axis x, y, z
@@ -46,9 +45,8 @@ class WBCConfig:
     limit_zeta: float = 1.0  # damping ratio of the barrier (1: critically damped)
     limit_margin: float = 0.01  # the barrier keeps joints this far [rad] inside their MuJoCo range
     limit_active: float = 300.0  # a range row enters the QP when its bound on |qdd| is under this [rad/s^2]
-    # a [1/s] of the swing-foot touchdown rows (0: none; see physicalize.wbc_rows.soft_rows)
-    touchdown_rate: float = 25.0
-    # m/s (0.5 fell in test_gait's -y push while walking): a descent-speed cap zdd >= -a (zd + speed)
+    # m/s (0.5 fell in test_gait's -y push while walking): the swing-foot touchdown rows' descent-speed cap
+    # zdd >= -a (zd + speed) (physicalize.wbc_rows.soft_rows)
     touchdown_speed: float = 0.8
     touchdown_zone: float = 0.10  # m: sole corners higher than this get no row
     # m: a held object farther than this from its reference position takes the hand targets along (the rest stays a
@@ -60,18 +58,15 @@ class WBCConfig:
     clearance_rate: float = 15.0
     clearance_zone: float = 0.05  # m: pairs farther than clearance + this get no row
     w_limit_slack: float = 1e4  # weight of the slack that keeps the QP feasible when a range row cannot hold
-    # contact state from the simulation
-    contact_stance: bool = True
-    # fraction of the weight carried by other contacts (a seat) that turns the stepping logic off
+    # contact state from the simulation: the fraction of the weight carried by other contacts (a seat) that turns the
+    # stepping logic off
     other_support: float = 0.2
     touch_force: float = 20.0  # N: a foot pressing the floor this hard is in contact
     # m: a swing foot in contact whose reference sole is this low and not rising has landed
     touchdown_height: float = 0.02
     descend_speed: float = 0.3  # m/s: a stance foot not yet on the floor is driven down at this speed
-    # capture-point (DCM) step adjustment of the swing foot's landing point
-    step_gain: float = 1.0  # landing point shift per metre of DCM error
+    # capture-point (DCM) step adjustment of the swing foot's landing point (physicalize.stepping)
     step_max: float = 0.2  # m, largest shift
-    com_anchor: float = 0.5  # the CoM target moves by this fraction of the stance feet's offset from their footsteps
     # m, least lateral distance of the swing foot from the stance foot (no crossing; 0.14 moved narrow footsteps
     # outward: frames 4557 -> 4877)
     min_foot_gap: float = 0.08

@@ -14,6 +14,8 @@ import numpy as np
 
 from pipeline.robot import JOINTS_QPOS, JOINTS_QVEL, NV_ROBOT
 
+TOUCHDOWN_RATE = 25.0  # a [1/s] of the swing-foot touchdown rows (soft_rows)
+
 
 def soft_rows(ctrl, d, target, stance: list[int]) -> tuple[np.ndarray, np.ndarray]:
     """Inequality rows ``G qdd <= h`` (``G`` (k, 35)) that the QP keeps with a slack:
@@ -22,7 +24,7 @@ def soft_rows(ctrl, d, target, stance: list[int]) -> tuple[np.ndarray, np.ndarra
       rows whose bound is within ``limit_active`` (the others cannot bind);
     * swing-foot touchdown: each sole corner of a swing foot lower than ``touchdown_zone``, height
       ``z`` and vertical speed ``zd`` (``zdd = J_z qdd + Jdot_z qd``), descends at most at
-      ``v = touchdown_speed``: ``zdd >= -a (zd + v)`` (``a`` = ``touchdown_rate``), so a foot is not
+      ``v = touchdown_speed``: ``zdd >= -a (zd + v)`` (``a`` = :data:`TOUCHDOWN_RATE`), so a foot is not
       driven into the floor (the floor's soft contact let a 2 m/s strike sink the sole 3.5 cm). A
       barrier towards a depth below the floor instead (like the joint ranges') measured worse: it
       delayed landings (Push fell at 108-143 frames with it, 207-277 without);
@@ -45,20 +47,19 @@ def soft_rows(ctrl, d, target, stance: list[int]) -> tuple[np.ndarray, np.ndarra
             g[6 + j] = 1.0
             Gs.append(g)
             hs.append(b_hi[j])
-    if cfg.touchdown_rate > 0:
-        a = cfg.touchdown_rate
-        for k in (k for k in range(2) if k not in stance):
-            fb = ctrl.feet[k]
-            R = d.xmat[fb].reshape(3, 3)
-            for p in ctrl.corners[k]:
-                pw = d.xpos[fb] + R @ p
-                if pw[2] > cfg.touchdown_zone:
-                    continue
-                jp, _, bp, _ = ctrl._jac(d, fb, pw)
-                zd = jp[2] @ d.qvel[:nv]
-                bound = -a * (zd + cfg.touchdown_speed)  # a speed cap only: zdd >= -a (zd + v_max)
-                Gs.append(-jp[2])
-                hs.append(bp[2] - bound)
+    a = TOUCHDOWN_RATE
+    for k in (k for k in range(2) if k not in stance):
+        fb = ctrl.feet[k]
+        R = d.xmat[fb].reshape(3, 3)
+        for p in ctrl.corners[k]:
+            pw = d.xpos[fb] + R @ p
+            if pw[2] > cfg.touchdown_zone:
+                continue
+            jp, _, bp, _ = ctrl._jac(d, fb, pw)
+            zd = jp[2] @ d.qvel[:nv]
+            bound = -a * (zd + cfg.touchdown_speed)  # a speed cap only: zdd >= -a (zd + v_max)
+            Gs.append(-jp[2])
+            hs.append(bp[2] - bound)
     if cfg.clearance_rate > 0 and ctrl.clear_pairs:
         G, h = clearance_rows(ctrl, d, seated=target.seated)
         Gs += G

@@ -128,6 +128,24 @@ def runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
+def label_runs(labels: np.ndarray) -> list[tuple[int, int, int]]:
+    """``[(start, stop, label)]`` of the runs of equal labels ``>= 0`` of a 1-D int array (negative: no label;
+    ``stop`` exclusive)."""
+    labels = np.asarray(labels)
+    if not len(labels):
+        return []
+    edges = (np.flatnonzero(np.diff(labels)) + 1).tolist()
+    return [(a, b, int(labels[a])) for a, b in zip([0, *edges], [*edges, len(labels)]) if labels[a] >= 0]
+
+
+def widen_runs(mask: np.ndarray, n: int) -> np.ndarray:
+    """``mask`` (1-D bool) with each True run widened by ``n`` frames at both ends (clipped to the array)."""
+    out = mask.copy()
+    for a, b in runs(mask):
+        out[max(0, a - n) : b + n] = True
+    return out
+
+
 def keep_runs(flags: np.ndarray, min_len: int, value: bool) -> np.ndarray:
     """``flags`` with runs of ``value`` shorter than ``min_len`` frames flipped.
 

@@ -4,7 +4,8 @@ feet stay on their footsteps, joint limits hold, objects stay frozen, footsteps 
 import numpy as np
 import pytest
 
-from physicalize.feasible import FeasibleConfig, ReferenceIK, feasible_reference, foot_targets, resolve_reference
+from physicalize.feasible import FeasibleConfig, ReferenceIK, feasible_reference, resolve_reference
+from physicalize.footsteps import foot_targets
 from physicalize.plan import plan_com
 from physicalize.reference import build_reference, place_on_floor
 from pipeline.geometry import Primitive

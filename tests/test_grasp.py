@@ -10,15 +10,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from physicalize.grasp import (
-    GraspConfig,
-    contact_friction,
-    grasp_schedule,
-    hand_geoms,
-    hand_offsets,
-    normal_force,
-    press_force,
-)
+from physicalize.grasp import GraspConfig, grasp_schedule
+from physicalize.grasp_force import contact_friction, normal_force, press_force
+from physicalize.hand_reach import hand_geoms, hand_offsets
 from physicalize.reference import build_reference, place_on_floor
 from physicalize.rollout import initial_state, simulate
 from physicalize.wbc import WholeBodyController

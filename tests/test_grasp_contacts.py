@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 from test_grasp import _arm_ik, _smooth, _track_box
 
-from physicalize.grasp import GraspConfig, grasp_schedule, hand_offsets
+from physicalize.grasp import GraspConfig, grasp_schedule
+from physicalize.hand_reach import hand_offsets
 from physicalize.reference import build_reference, place_on_floor
 from pipeline.geometry import ObjectPhysics, Primitive
 from pipeline.robot import HAND_BODIES, default_qpos

@@ -116,7 +116,7 @@ def test_support_points_take_the_post_under_the_pelvis():
     d = mujoco.MjData(m)
     d.qpos[:36] = q0
     mujoco.mj_forward(m, d)
-    pts = support_points(ctrl, d, ctrl.unseated_geoms)
+    pts = support_points(ctrl.contacts, d, ctrl.unseated_geoms)
     assert [m.body(p.body).name for p in pts] == ["pelvis"]
     p = pts[0]
     assert p.frame[0] @ [0, 0, 1.0] > 0.99 and np.allclose(p.frame @ p.frame.T, np.eye(3), atol=1e-9)

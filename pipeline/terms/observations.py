@@ -41,6 +41,11 @@ ROOT_COMMAND_NAMES: tuple[str, ...] = (
 )
 
 
+def rot6(R: np.ndarray) -> np.ndarray:
+    """(..., 6) the 6-D rotation of rotation matrices ``R`` (..., 3, 3): their first two columns, column-major."""
+    return np.swapaxes(R[..., :, :2], -1, -2).reshape(*R.shape[:-2], 6)
+
+
 def projected_gravity(qpos: np.ndarray) -> np.ndarray:
     """(T, 3) unit gravity direction in the root frame, ``R_root^T (0, 0, -1)``."""
     return rotation_from_wxyz(qpos[:, 3:7]).inv().apply([0.0, 0.0, -1.0])
@@ -67,6 +72,5 @@ def root_command(qpos: np.ndarray, qvel: np.ndarray, fps: float, horizon_s: floa
     j = np.minimum(np.arange(T) + int(round(horizon_s * fps)), T - 1)
     h_inv = heading(qpos).inv()
     dpos = h_inv.apply(qpos[j, :3] - qpos[:, :3])
-    rel = (h_inv * rotation_from_wxyz(qpos[j, 3:7])).as_matrix()
-    rot6d = rel[:, :, :2].transpose(0, 2, 1).reshape(T, 6)
+    rot6d = rot6((h_inv * rotation_from_wxyz(qpos[j, 3:7])).as_matrix())
     return np.concatenate([dpos, rot6d, h_inv.apply(qvel[j, :3])], axis=1)

@@ -1,0 +1,155 @@
+"""The force the hands of a grasp (:mod:`physicalize.grasp`) must apply to a held object, and the friction
+that lets them.
+
+With the reference object velocity ``v_o`` and acceleration ``a_o`` (central differences of its track)
+and ``lambda(t) = clip((z_o(t) - z_o(t_0)) / lift_blend, 0, 1)`` (0 while the object rests where the hold
+started, 1 once lifted), the hands must apply (:meth:`ObjectLoad.force`)
+``F = m [a_o,xy; lambda a_o,z] + lambda m g e_z + r mu_s m g min(1, |v_xy| / slide_speed) v_xy/|v_xy|``
+(its inertia, its weight once lifted, its sliding friction on its support for the share ``r`` of its
+weight that still rests there; ``mu_s``: the object-floor friction by MuJoCo's mixing rule); a one-side
+lift carries only :attr:`~physicalize.grasp_config.GraspConfig.side_lift` of the weight (the far side still
+rests, and drags: ``r = 1 - side_lift lambda``; between squeezing hands ``r = 1 - lambda``). Each holding
+hand takes ``F_k = F / n_hands`` (:func:`hand_force`). Squeezing: the part along the surface,
+``F_t,k = F_k - (F_k . n_k) n_k``, must come from friction, so
+``N_k = clip(max(N_min, safety |F_t,k| / mu), 0, N_max)`` and ``f_k = N_k n_k + F_k`` (:func:`normal_force`).
+Pressing from one side there is no squeeze to cancel: ``N_k = max(F_k . n_k, safety |F_t,k| / mu, 0)``,
+``f_k = F_k + (N_k - F_k . n_k) n_k`` (exactly ``F_k`` for a push along the normal; :func:`press_force`).
+``|f_k|`` is capped at :attr:`~physicalize.grasp_config.GraspConfig.max_hand_force`; ``ok`` records whether
+the plan is within friction: squeezing, ``mu N_k >= |F_t,k|`` under the caps; pressing from one side, the
+force needed itself in the cone, ``mu F_k . n_k >= |F_t,k|`` (a hand that only presses cannot pull: the
+InterMimic table, dragged towards the body).
+
+``mu`` and ``condim`` of a hand-object contact follow MuJoCo's mixing rule (:func:`contact_friction`): the
+geom with the higher ``priority`` decides, else the larger friction and condim; ``condim 1`` (frictionless)
+cannot hold anything and raises (:func:`hand_friction`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from physicalize.grasp_config import GraspConfig
+
+GRAVITY = 9.81
+# N: a planned force this far outside a friction cone still counts as inside (resting objects: numerical noise)
+FRICTION_TOL_N = 0.5
+
+
+def contact_friction(model: mujoco.MjModel, g1: int, g2: int) -> tuple[int, float]:
+    """``(condim, mu)`` MuJoCo uses for a contact between geoms ``g1`` and ``g2``: those of the geom
+    with the higher ``priority``; at equal priority the larger condim and the larger sliding friction."""
+    p1, p2 = model.geom_priority[g1], model.geom_priority[g2]
+    if p1 != p2:
+        g = g1 if p1 > p2 else g2
+        return int(model.geom_condim[g]), float(model.geom_friction[g, 0])
+    return int(max(model.geom_condim[g1], model.geom_condim[g2])), float(
+        max(model.geom_friction[g1, 0], model.geom_friction[g2, 0])
+    )
+
+
+def hand_friction(model: mujoco.MjModel, hand_geoms: list[list[int]], object_geoms: list[int], name: str) -> float:
+    """The least sliding friction of any hand geom (both hands) on any of the object's geoms; raises
+    ``ValueError`` for a frictionless pair (condim < 3 or no friction), which cannot hold."""
+    mu = np.inf
+    for geoms in hand_geoms:
+        for hg in geoms:
+            for og in object_geoms:
+                condim, f = contact_friction(model, hg, og)
+                if condim < 3 or f <= 0:
+                    raise ValueError(
+                        f"hand geom {model.geom(hg).name!r} on {name!r}: condim {condim}, friction {f}: a frictionless "
+                        "contact cannot hold"
+                    )
+                mu = min(mu, f)
+    return mu
+
+
+def floor_friction(model: mujoco.MjModel, geoms: list[int]) -> float:
+    """Sliding friction of the object's geoms on the floor (MuJoCo's mixing rule)."""
+    floor = model.geom("floor").id
+    return max(contact_friction(model, g, floor)[1] for g in geoms) if geoms else 0.0
+
+
+def normal_force(load: np.ndarray, n: np.ndarray, mu: float, cfg: GraspConfig) -> tuple[float, bool]:
+    """``(N, ok)``: squeeze force for a hand carrying ``load`` (3,) through a contact of inward
+    normal ``n`` and friction ``mu``; ``ok``: ``mu N >= |load_t|``."""
+    tangential = float(np.linalg.norm(load - (load @ n) * n))
+    N = float(np.clip(max(cfg.min_normal_force, cfg.safety * tangential / mu), 0.0, cfg.max_normal_force))
+    return N, mu * N >= tangential - 1e-9
+
+
+def press_force(load: np.ndarray, n: np.ndarray, mu: float, cfg: GraspConfig) -> tuple[np.ndarray, bool]:
+    """``(f, ok)``: the force a hand pressing on an object from one side (inward normal ``n``, friction ``mu``)
+    applies for its share ``load`` (3,) of the needed force: ``load`` plus the normal force that makes its
+    tangential part at most ``mu / safety`` of the normal one, ``f = load + (N - load.n) n`` with
+    ``N = max(load.n, safety |load_t| / mu, 0)``; ``ok``: ``load`` itself lies in the friction cone,
+    ``mu load.n >= |load_t|`` (within :data:`FRICTION_TOL_N`): a hand that only presses cannot pull."""
+    push = float(load @ n)
+    tangential = float(np.linalg.norm(load - push * n))
+    N = min(max(push, cfg.safety * tangential / mu, 0.0), cfg.max_hand_force)
+    return load + (N - push) * n, mu * push >= tangential - FRICTION_TOL_N
+
+
+def hand_force(
+    share: np.ndarray, n: np.ndarray, mu: float, squeezed: bool, cfg: GraspConfig
+) -> tuple[np.ndarray, bool]:
+    """``(f_k, ok)``: the force of a hand carrying ``share`` (3,) through inward normal ``n``, squeezing
+    (:func:`normal_force`) or pressing from one side (:func:`press_force`), capped at ``max_hand_force``
+    (``ok`` False when capped)."""
+    if squeezed:
+        N, ok = normal_force(share, n, mu, cfg)
+        f_k = N * n + share
+    else:  # pushing from one side: no squeeze to cancel
+        f_k, ok = press_force(share, n, mu, cfg)
+    nf = np.linalg.norm(f_k)
+    if nf > cfg.max_hand_force:
+        f_k *= cfg.max_hand_force / nf
+        ok = False
+    return f_k, ok
+
+
+@dataclass(frozen=True)
+class ObjectLoad:
+    """A held object's mass, floor friction and reference track's motion over a hold starting at frame
+    ``start``: velocity ``v`` and acceleration ``a`` (T, 3), lifted share ``lam`` (T,) of its weight."""
+
+    mass: float
+    floor_mu: float
+    v: np.ndarray
+    a: np.ndarray
+    lam: np.ndarray
+
+    @classmethod
+    def of(
+        cls,
+        model: mujoco.MjModel,
+        body: int,
+        geoms: list[int],
+        pos: np.ndarray,
+        start: int,
+        fps: float,
+        cfg: GraspConfig,
+    ) -> ObjectLoad:
+        """The load of object ``body`` (collision ``geoms``) along its reference positions ``pos`` (T, 3)."""
+        T, dt = len(pos), 1.0 / fps
+        v = np.gradient(pos, dt, axis=0) if T > 1 else np.zeros_like(pos)
+        a = np.gradient(v, dt, axis=0) if T > 2 else np.zeros_like(pos)
+        lam = np.clip((pos[:, 2] - pos[start, 2]) / cfg.lift_blend, 0.0, 1.0)
+        return cls(float(model.body_subtreemass[body]), floor_friction(model, geoms), v, a, lam)
+
+    def force(self, t: int, squeezed: bool, cfg: GraspConfig) -> np.ndarray:
+        """``F`` (3,) the hands must apply at frame ``t`` (module docstring), between squeezing hands or from
+        one side."""
+        mass, v, a, lam = self.mass, self.v[t], self.a[t], self.lam[t]
+        speed = float(np.linalg.norm(v[:2]))
+        drag = np.zeros(3)
+        if speed > 1e-6:  # sliding on its support: kinetic friction against the motion
+            drag[:2] = self.floor_mu * mass * GRAVITY * min(1.0, speed / cfg.slide_speed) * v[:2] / speed
+        rest = 1 - lam if squeezed else 1 - cfg.side_lift * lam  # share of its weight still on its support
+        F = mass * np.r_[a[:2], lam * a[2]] + lam * mass * GRAVITY * np.array([0, 0, 1.0]) + rest * drag
+        if not squeezed:  # lifted from one side only: the far side still rests on its support
+            F[2] -= (1 - cfg.side_lift) * lam * mass * (GRAVITY + a[2])
+        return F
