@@ -11,6 +11,8 @@ NAME   ?= default
 INPUT  ?=
 STAGE_ARGS = --name $(NAME) $(if $(INPUT),--input $(INPUT)) $(if $(OVERWRITE),--overwrite)
 JOBS ?= 1
+EXECUTOR ?= local
+RUN_ARGS = -j $(JOBS) --executor $(EXECUTOR)
 
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
@@ -29,11 +31,11 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 	touch $@
 
 retarget: install
-	$(CLI) retarget $(STAGE_ARGS) -j $(JOBS)
+	$(CLI) retarget $(STAGE_ARGS) $(RUN_ARGS)
 
 TEACHER ?= base
 physicalize: install
-	$(CLI) physicalize $(STAGE_ARGS) --teacher $(TEACHER) $(if $(KEEP_INVALID),--keep-invalid)
+	$(CLI) physicalize $(STAGE_ARGS) $(RUN_ARGS) --teacher $(TEACHER) $(if $(KEEP_INVALID),--keep-invalid)
 
 # Smoke scale (CPU, ~1-2 min): a residual on one retargeted clip; then `make physicalize TEACHER=base+residual:$(CKPT)`.
 EPISODE ?= 0
@@ -45,7 +47,7 @@ train-residual: install
 	$(CLI) physicalize-residual --name $(NAME) --episode $(EPISODE) --iterations $(ITERATIONS) --envs $(ENVS) --seed $(SEED) --out $(CKPT)
 
 features: install
-	$(CLI) features --name $(NAME) $(if $(OVERWRITE),--overwrite)
+	$(CLI) features --name $(NAME) $(if $(OVERWRITE),--overwrite) $(RUN_ARGS)
 
 # ruff (pinned in the dev extras, configured in pyproject.toml): `make format` rewrites, `make lint` checks.
 lint: install

@@ -50,7 +50,7 @@ from physicalize.wbc_config import TEACHER_GAINS  # noqa: E402
 from pipeline.default_input import default_clips  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
 from pipeline.scene import build_scene  # noqa: E402
-from retarget.stage import retarget_clip  # noqa: E402
+from retarget.clip import retarget_clip  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
 GAIT_STEPS_M = (0.1, 0.2, 0.3, 0.4, 0.5)  # centre-line advance per step (each foot moves twice that)

@@ -21,8 +21,8 @@ torch.set_num_threads(1)
 
 from pipeline.default_input import default_clips  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
+from retarget.clip import retarget_clip  # noqa: E402
 from retarget.metrics import evaluate_file  # noqa: E402
-from retarget.stage import retarget_clip  # noqa: E402
 
 REPEATS = 3
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"

@@ -7,23 +7,34 @@ interaction features of :mod:`features.compute`: ``observation.df`` (the paper's
 ``observation.df_relative`` (v relative to the object's closest surface point), ``observation.df_demo``
 (the released demo's 7 x 4 layout), ``observation.df_object`` (nearest object per link, with several
 objects), ``observation.root_command`` (12) and ``observation.proprio`` (93). The task label is the
-episode's LeRobot task. The dataset is written atomically; the stage takes seconds per clip. A rerun on
-the same physicalized dataset with the same config is up to date and does nothing (:mod:`pipeline.stage.state`).
+episode's LeRobot task. The dataset is written atomically; the stage takes seconds per clip. The clips run
+in worker processes or on Ray (``jobs``, ``executor``) and an interrupted run resumes (:mod:`pipeline.stage.run`);
+a rerun on the same physicalized dataset with the same config is up to date and does nothing.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import asdict
+from functools import partial
+from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from features.compute import ClipFeatures, FeatureConfig, FieldCache, clip_features
+from features.plot import plot_df
 from pipeline.clip import PhysicalizedClip
+from pipeline.dataset.card import DatasetCard
+from pipeline.dataset.clips import episodes_to_physicalized_clips, physicalized_clips_to_episodes
+from pipeline.dataset.read import read_card
 from pipeline.dataset.schema import Feature
+from pipeline.dataset.write import write_dataset
 from pipeline.errors import InputError
 from pipeline.robot import g1_model
+from pipeline.stage.executor import check_executor
+from pipeline.stage.paths import file_stem, logs_dir, stage_dir
+from pipeline.stage.run import StageRun, digest
+from pipeline.stage.state import dataset_fingerprint, fingerprint
 from pipeline.terms.interaction import DEMO_PARTS, DF_PARTS, feature_names
 from pipeline.terms.link_motion import body_ids
 from pipeline.terms.observations import PROPRIO_NAMES, ROOT_COMMAND_NAMES
@@ -36,7 +47,7 @@ CARD_NOTES = [
     "kinematics, not finite differences).",
     "The interaction window I_t is not stored: load it with LeRobot's `delta_timestamps`, e.g. "
     "`{'observation.df': [-0.08, -0.06, -0.04, -0.02, 0.0]}` for l = 5 at 50 fps (frames before the episode start are "
-    "padded and flagged `*_is_pad`), or with `pipeline.dataset.read.WindowDataset(root, keys, history=5)`.",
+    "padded and flagged `*_is_pad`), or with `pipeline.dataset.WindowDataset(root, keys, history=5)`.",
     "`observation.df_demo` is the input contract of the released LessMimic web demo: for its 7 query bodies, "
     "min(phi, 1 m) and grad in the body's own frame.",
 ]
@@ -117,96 +128,59 @@ def _any_contact(clip: PhysicalizedClip) -> np.ndarray | None:
     return np.any(c, axis=0) if c else None
 
 
-def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | None = None) -> dict:
-    """``lessmimic features``: compute the features of every physicalized clip, write the dataset, report and plots."""
-    from features.plot import plot_df
-    from pipeline.dataset.card import DatasetCard
-    from pipeline.dataset.clips import episodes_to_physicalized_clips, physicalized_clips_to_episodes
-    from pipeline.dataset.read import read_card
-    from pipeline.dataset.write import check_target, write_dataset
-    from pipeline.stage.atomic import write_json_atomic
-    from pipeline.stage.paths import file_stem, stage_dir
-    from pipeline.stage.state import KEY, dataset_fingerprint, fingerprint, up_to_date
+_FIELDS = FieldCache()  # per process: an object's field is built once, however many clips use it
 
-    cfg = config or FeatureConfig()
-    body_ids(g1_model(), cfg.query_links, "--links")  # an unknown link fails before any work
-    src, out = stage_dir(name, "physicalized"), stage_dir(name, "features")
-    if not (src / "meta" / "info.json").is_file():
-        ran = src.parent / "logs" / "physicalized" / "report.json"
-        if not ran.is_file():
-            raise InputError(
-                src, "meta/info.json", "no physicalized dataset here: run `lessmimic physicalize --name NAME` first"
-            )
-        # The physicalize stage ran and kept no clip (none valid): a measured outcome, not an error.
-        why = (
-            f"nothing to do: the physicalize stage kept no clip (none valid; see {ran}); "
-            "`make physicalize KEEP_INVALID=1 OVERWRITE=1` keeps invalid clips with their validation figures"
-        )
-        return {
-            "stage": "features",
-            "skipped": why,
-            "clips": [],
-            "summary": {"clips": 0, "frames": 0, "frames_per_cpu_s": 0.0},
-        }
-    fp, logs = (
-        fingerprint(stage="features", physicalized=dataset_fingerprint(src), config=asdict(cfg)),
-        out.parent / "logs" / "features",
-    )
-    recorded = None if overwrite or not out.is_dir() else up_to_date(logs / "report.json", fp)
-    if recorded is not None:
-        return {**recorded, "up_to_date": True}
-    check_target(out, overwrite)
-    clips = episodes_to_physicalized_clips(src)
-    names = [o.name for o in clips[0].robot.objects]
-    if not names:
-        raise InputError(
-            src, "objects", "the dataset has no object tracks: distance-field features need at least one object"
-        )
-    t0 = time.perf_counter()
-    cache, per_clip, extra, setup = FieldCache(), [], [], 0.0
-    for clip in tqdm(clips, desc="features", unit="clip"):
-        c0 = time.process_time()
-        cache.fields(clip)  # loading meshes and warp, once per object geometry: reported apart from the per-frame work
-        setup += time.process_time() - c0
-        c0 = time.process_time()
-        f = clip_features(clip, cfg, cache)
-        cpu = max(time.process_time() - c0, 1e-9)
-        extra.append(f)
-        per_clip.append(
-            {
-                "source": clip.robot.source,
-                "task": clip.robot.task,
-                "frames": clip.frames,
-                "cpu_s": cpu,
-                "frames_per_cpu_s": clip.frames / cpu,
-                "link_queries_per_cpu_s": clip.frames * len(cfg.query_links) / cpu,
-                "phi_min_m": float(f.df[..., 0].min()),
-                "valid": bool(clip.validation.get("valid", False)),
-            }
-        )
-    features, episodes = physicalized_clips_to_episodes(clips)
-    features += _features(cfg, names)
-    for ep, f in zip(episodes, extra):
-        ep.data.update(_data(f, len(names) > 1))
-        ep.meta.update({"stage": "features", "features": asdict(cfg)})
-    frames = sum(c["frames"] for c in per_clip)
-    cpu = sum(c["cpu_s"] for c in per_clip)
-    report = {
-        "stage": "features",
-        "config": asdict(cfg),
-        "clips": per_clip,
-        KEY: fp,
-        "summary": {
-            "clips": len(clips),
-            "frames": frames,
-            "cpu_s": cpu,
-            "frames_per_cpu_s": frames / max(cpu, 1e-9),
-            "fields_setup_cpu_s": setup,
-        },
+
+def features_one(item: tuple[int, PhysicalizedClip], config: FeatureConfig) -> tuple[ClipFeatures, dict]:
+    """The features of the ``(index, clip)`` item and its figures (CPU time of the per-frame work, apart from
+    loading the objects' fields: meshes and warp, once per object geometry and process)."""
+    _, clip = item
+    c0 = time.process_time()
+    _FIELDS.fields(clip)
+    setup = time.process_time() - c0
+    c0 = time.process_time()
+    f = clip_features(clip, config, _FIELDS)
+    cpu = max(time.process_time() - c0, 1e-9)
+    return f, {
+        "source": clip.robot.source,
+        "task": clip.robot.task,
+        "frames": clip.frames,
+        "cpu_s": cpu,
+        "frames_per_cpu_s": clip.frames / cpu,
+        "link_queries_per_cpu_s": clip.frames * len(config.query_links) / cpu,
+        "phi_min_m": float(f.df[..., 0].min()),
+        "valid": bool(clip.validation.get("valid", False)),
+        "fields_setup_cpu_s": setup,
     }
+
+
+def _clip_key(k: int, item: tuple[int, PhysicalizedClip]) -> str:
+    clip = item[1]
+    return digest(k, clip.robot.source, clip.robot.qpos, clip.qvel, *(o.pose for o in clip.robot.objects))
+
+
+def _nothing_to_do(src: Path) -> dict:
+    """The physicalize stage ran and kept no clip (none valid): a measured outcome, not an error."""
+    ran = logs_dir(src) / "report.json"
+    if not ran.is_file():
+        why = "no physicalized dataset here: run `lessmimic physicalize --name NAME` first"
+        raise InputError(src, "meta/info.json", why)
+    why = (
+        f"nothing to do: the physicalize stage kept no clip (none valid; see {ran}); "
+        "`make physicalize KEEP_INVALID=1 OVERWRITE=1` keeps invalid clips with their validation figures"
+    )
+    return {
+        "stage": "features",
+        "skipped": why,
+        "clips": [],
+        "summary": {"clips": 0, "frames": 0, "frames_per_cpu_s": 0.0},
+    }
+
+
+def _card(name: str, src: Path, clips: list[PhysicalizedClip]) -> DatasetCard:
     prev = read_card(src)
     synthetic = any(c.robot.provenance.get("synthetic") for c in clips)
-    card = DatasetCard(
+    return DatasetCard(
         title=f"{name}: G1 interaction features (distance fields)",
         description=("SYNTHETIC demonstrations: " if synthetic else "")
         + "physically simulated G1 state-action data with LessMimic "
@@ -220,21 +194,65 @@ def run_stage(name: str, *, overwrite: bool = False, config: FeatureConfig | Non
         feature_frames={**(prev.feature_frames if prev else {}), **_FRAMES},
         notes=(prev.notes if prev else []) + CARD_NOTES,
     )
+
+
+def run_stage(
+    name: str, *, overwrite: bool = False, config: FeatureConfig | None = None, jobs: int = 1, executor: str = "local"
+) -> dict:
+    """``lessmimic features``: compute the features of every physicalized clip, write the dataset, report and plots."""
+    check_executor(executor, jobs)
+    cfg = config or FeatureConfig()
+    body_ids(g1_model(), cfg.query_links, "--links")  # an unknown link fails before any work
+    src = stage_dir(name, "physicalized")
+    if not (src / "meta" / "info.json").is_file():
+        return _nothing_to_do(src)
+    run = StageRun(
+        stage_dir(name, "features"),
+        fingerprint(stage="features", physicalized=dataset_fingerprint(src), config=asdict(cfg)),
+    )
+    if not overwrite and (done := run.finished()) is not None:
+        return {**done, "up_to_date": True}
+    run.begin(overwrite)
+    clips = episodes_to_physicalized_clips(src)
+    names = [o.name for o in clips[0].robot.objects]
+    if not names:
+        why = "the dataset has no object tracks: distance-field features need at least one object"
+        raise InputError(src, "objects", why)
+    t0 = time.perf_counter()
+    compute = partial(features_one, config=cfg)
+    results = run.map(compute, list(enumerate(clips)), key=_clip_key, jobs=jobs, executor=executor, desc="features")
+    per_clip = [{k: v for k, v in figures.items() if k != "fields_setup_cpu_s"} for _, figures in results]
+    features, episodes = physicalized_clips_to_episodes(clips)
+    features += _features(cfg, names)
+    for ep, (f, _) in zip(episodes, results):
+        ep.data.update(_data(f, len(names) > 1))
+        ep.meta.update({"stage": "features", "features": asdict(cfg)})
+    frames, cpu = sum(c["frames"] for c in per_clip), sum(c["cpu_s"] for c in per_clip)
+    summary = {
+        "clips": len(clips),
+        "frames": frames,
+        "cpu_s": cpu,
+        "frames_per_cpu_s": frames / max(cpu, 1e-9),
+        "fields_setup_cpu_s": sum(figures["fields_setup_cpu_s"] for _, figures in results),
+    }
+    fps = int(round(clips[0].robot.fps))
     write_dataset(
-        out,
+        run.out,
         f"lessmimic/{name}-features",
-        int(round(clips[0].robot.fps)),
+        fps,
         features,
         episodes,
-        card=card,
-        overwrite=overwrite,
+        card=_card(name, src, clips),
+        overwrite=run.replaces,
     )
-    for k, (clip, f) in enumerate(zip(clips, extra)):
+    for k, (clip, (f, _)) in enumerate(zip(clips, results)):
         title = f"{clip.robot.source} ({clip.robot.task or 'no task'}): DF over {len(cfg.links)} links"
         plot_df(
-            f.df, _any_contact(clip), clip.robot.fps, title[:150], logs / f"{k:03d}_{file_stem(clip.robot.source)}.png"
+            f.df,
+            _any_contact(clip),
+            clip.robot.fps,
+            title[:150],
+            run.logs / f"{k:03d}_{file_stem(clip.robot.source)}.png",
         )
-    report["seconds_wall"] = time.perf_counter() - t0
-    write_json_atomic(out / "report.json", report)
-    write_json_atomic(logs / "report.json", report)  # last: its fingerprint marks a finished run
-    return report
+    report = {"stage": "features", "config": asdict(cfg), "clips": per_clip, "summary": summary}
+    return run.finish({**report, "seconds_wall": time.perf_counter() - t0}, dataset_written=True)

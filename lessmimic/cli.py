@@ -5,8 +5,8 @@ demonstrations) and write ``datasets/<NAME>/<stage>/``, a LeRobot v3.0 dataset r
 with a ``report.json``; inspection logs go to ``datasets/<NAME>/logs/<stage>/``.
 Bad input stops with one line ``error: <file>: frame <k>: <field>: <problem>`` and exit
 status 2, leaving no partial output. A rerun on the same input with the same options finds
-its output up to date and does nothing (:mod:`pipeline.stage.state`); other input or options
-over an existing output need ``--overwrite``.
+its output up to date and does nothing; an interrupted run (killed at any point) resumes where it
+stopped (:mod:`pipeline.stage.run`); other input or options over an existing output need ``--overwrite``.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from pipeline.errors import InputError
+from pipeline.stage.executor import EXECUTORS
 from pipeline.stage.state import up_to_date_line
 
 
@@ -35,11 +36,28 @@ def _stage_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _run_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("-j", "--jobs", type=int, default=1, help="worker processes over clips (default 1)")
+    p.add_argument(
+        "--executor",
+        default="local",
+        choices=EXECUTORS,
+        help="where the clips run: local worker processes, or a Ray cluster ($RAY_ADDRESS; unset: a local Ray "
+        "instance of --jobs CPUs) (default local)",
+    )
+
+
 def _cmd_retarget(a: argparse.Namespace) -> int:
     from retarget.stage import run_stage
 
     report = run_stage(
-        a.input, a.name, overwrite=a.overwrite, jobs=a.jobs, body_model=a.body_model, height_override=a.height
+        a.input,
+        a.name,
+        overwrite=a.overwrite,
+        jobs=a.jobs,
+        executor=a.executor,
+        body_model=a.body_model,
+        height_override=a.height,
     )
     if report.get("up_to_date"):
         print(up_to_date_line("retarget", a.name, "retargeted"))
@@ -63,7 +81,15 @@ def _cmd_retarget(a: argparse.Namespace) -> int:
 def _cmd_physicalize(a: argparse.Namespace) -> int:
     from physicalize.stage import run_stage
 
-    report = run_stage(a.name, overwrite=a.overwrite, teacher=a.teacher, profile=a.profile, keep_invalid=a.keep_invalid)
+    report = run_stage(
+        a.name,
+        overwrite=a.overwrite,
+        teacher=a.teacher,
+        profile=a.profile,
+        keep_invalid=a.keep_invalid,
+        jobs=a.jobs,
+        executor=a.executor,
+    )
     if report.get("up_to_date"):
         print(up_to_date_line("physicalize", a.name, "physicalized"))
         return 0
@@ -106,7 +132,7 @@ def _cmd_features(a: argparse.Namespace) -> int:
     from features.stage import run_stage
 
     cfg = FeatureConfig(**({"links": tuple(a.links.split(","))} if a.links else {}))
-    report = run_stage(a.name, overwrite=a.overwrite, config=cfg)
+    report = run_stage(a.name, overwrite=a.overwrite, config=cfg, jobs=a.jobs, executor=a.executor)
     if report.get("up_to_date"):
         print(up_to_date_line("features", a.name, "features"))
         return 0
@@ -177,26 +203,26 @@ def _cmd_merge(a: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
-        prog="lessmimic", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    sub = ap.add_subparsers(dest="command", required=True)
+def _add_retarget(sub) -> None:
     p = sub.add_parser(
         "retarget",
         help="mocap -> G1 clips by mink IK (datasets/<NAME>/retargeted/); the ingested human clips go to "
         "datasets/<NAME>/human/",
     )
     _stage_args(p)
-    p.add_argument("-j", "--jobs", type=int, default=1, help="worker processes over clips (default 1)")
+    _run_args(p)
     p.add_argument(
         "--height", type=float, default=None, help="subject height override in metres (outside 1.0-2.3 m needs it)"
     )
     p.set_defaults(func=_cmd_retarget)
+
+
+def _add_physicalize(sub) -> None:
     p = sub.add_parser(
         "physicalize", help="retargeted clips -> simulated state-action data (datasets/<NAME>/physicalized/)"
     )
     _stage_args(p)
+    _run_args(p)
     p.add_argument(
         "--teacher",
         default="base",
@@ -212,6 +238,29 @@ def build_parser() -> argparse.ArgumentParser:
         help="also write clips that fail validation (they are always in report.json)",
     )
     p.set_defaults(func=_cmd_physicalize)
+
+
+def _add_features(sub) -> None:
+    p = sub.add_parser(
+        "features", help="physicalized data -> distance-field interaction features (datasets/<NAME>/features/)"
+    )
+    p.add_argument(
+        "--name",
+        default="default",
+        help="dataset name: reads datasets/<NAME>/physicalized/, writes datasets/<NAME>/features/",
+    )
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output dataset")
+    _run_args(p)
+    p.add_argument(
+        "--links",
+        default=None,
+        help="comma-separated G1 body names for observation.df (default: pelvis, torso, hips, knees, "
+        "ankles, shoulders, elbows, wrists)",
+    )
+    p.set_defaults(func=_cmd_features)
+
+
+def _add_residual(sub) -> None:
     p = sub.add_parser(
         "physicalize-residual",
         help="train the physicalize teacher's learned residual (PPO, CPU) on one retargeted clip",
@@ -226,22 +275,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--profile", default="mjlab", help="actuator profile (default mjlab)")
     p.add_argument("--out", required=True, help="checkpoint path (.pt)")
     p.set_defaults(func=_cmd_physicalize_residual)
-    p = sub.add_parser(
-        "features", help="physicalized data -> distance-field interaction features (datasets/<NAME>/features/)"
-    )
-    p.add_argument(
-        "--name",
-        default="default",
-        help="dataset name: reads datasets/<NAME>/physicalized/, writes datasets/<NAME>/features/",
-    )
-    p.add_argument("--overwrite", action="store_true", help="replace an existing output dataset")
-    p.add_argument(
-        "--links",
-        default=None,
-        help="comma-separated G1 body names for observation.df (default: pelvis, torso, hips, knees, "
-        "ankles, shoulders, elbows, wrists)",
-    )
-    p.set_defaults(func=_cmd_features)
+
+
+def _add_tools(sub) -> None:
     p = sub.add_parser("inspect", help="write an MCAP inspection log (Foxglove) for a clip file")
     p.add_argument("file")
     p.add_argument("--out", required=True, help="output .mcap path")
@@ -274,6 +310,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--repo-id", required=True)
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=_cmd_merge)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="lessmimic", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = ap.add_subparsers(dest="command", required=True)
+    for add in (_add_retarget, _add_physicalize, _add_residual, _add_features, _add_tools):
+        add(sub)
     return ap
 
 

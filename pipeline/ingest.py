@@ -14,8 +14,13 @@ from pathlib import Path
 from tqdm import tqdm
 
 from pipeline.clip import HumanClip
-from pipeline.dataset.write import check_target
+from pipeline.dataset.card import DatasetCard
+from pipeline.dataset.clips import human_clips_to_episodes
+from pipeline.dataset.write import check_target, write_dataset
+from pipeline.default_input import default_clips
+from pipeline.readers import read_clips
 from pipeline.stage.atomic import write_json_atomic
+from pipeline.stage.inspect_log import write_human_log
 from pipeline.stage.paths import file_stem, stage_dir
 
 HUMAN_FPS = 30
@@ -31,11 +36,7 @@ class IngestResult:
 def load_input(input_path: str | None, *, body_model: str | None = None, fps: float | None = None) -> list[HumanClip]:
     """Clips from ``input_path`` (file or folder), or the embedded synthetic default when None."""
     if input_path is None:
-        from pipeline.default_input import default_clips
-
         return default_clips()
-    from pipeline.readers import read_clips
-
     return read_clips(Path(input_path), body_model=body_model, fps=fps)
 
 
@@ -48,11 +49,6 @@ def ingest(
     root: Path | None = None,
 ) -> IngestResult:
     """Read, validate and resample to :data:`HUMAN_FPS`, write the dataset, reload it with LeRobot."""
-    from pipeline.dataset.card import DatasetCard
-    from pipeline.dataset.clips import human_clips_to_episodes
-    from pipeline.dataset.write import write_dataset
-    from pipeline.stage.inspect_log import write_human_log
-
     out = stage_dir(name, "human", root)
     check_target(out, overwrite)  # before any work, so the user sees only this line
     t0 = time.perf_counter()

@@ -1,38 +1,37 @@
-"""The retarget stage: every human clip of the input -> a G1 :class:`RobotClip`, written as
-``datasets/<NAME>/retargeted/`` (LeRobot) with ``report.json``, and per clip an MCAP log and a
-PNG plot (:mod:`retarget.plot`) in ``datasets/<NAME>/logs/retargeted/``.
+"""The retarget stage: every human clip of the input -> a G1 :class:`RobotClip` (:func:`retarget.clip.retarget_clip`),
+written as ``datasets/<NAME>/retargeted/`` (LeRobot) with ``report.json``, and per clip an MCAP log and a PNG plot
+(:mod:`retarget.plot`) in ``datasets/<NAME>/logs/retargeted/``.
 
-Per clip (independent, so a process pool runs them): resample the human clip to the control
-rate (:data:`FPS`), pick its mapping, compute the scale, build :class:`IKTargets`, map the
-objects into the robot's world, solve the IK in a scene built with the same collision model
-as the physics, label per-link contacts from the human's, and measure
-:func:`retarget.metrics.retarget_metrics`. A finished clip is cached in
-``datasets/<NAME>/.work/retarget/`` (keyed by the clip's data and index), so a re-run after an
-interruption resumes where it stopped (``--overwrite`` starts afresh; a finished stage removes
-the cache); a failing clip is reported with its one-line error and the others go on. A rerun on
-the same input with the same options finds the dataset up to date (:func:`input_fingerprint`,
-recorded in ``report.json``) and does nothing.
+The clips are independent: they run in worker processes or on Ray (``jobs``, ``executor``), each kept as it
+finishes so an interrupted run resumes (:mod:`pipeline.stage.run`); a failing clip is reported with its one-line
+error and the others go on. A rerun on the same input with the same options finds the dataset up to date
+(:func:`input_fingerprint`) and does nothing.
 """
 
 from __future__ import annotations
 
-import hashlib
-import pickle
-import shutil
 import time
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
-import numpy as np
 from tqdm import tqdm
 
+from pipeline import default_input, synthetic
 from pipeline.clip import HumanClip, RobotClip
+from pipeline.dataset.card import DatasetCard
+from pipeline.dataset.clips import robot_clips_to_episodes
+from pipeline.dataset.write import write_dataset
 from pipeline.errors import InputError
-from pipeline.scene import SceneObject, build_scene
-
-FPS = 50
-METHOD = "lessmimic-mink"
+from pipeline.ingest import ingest
+from pipeline.stage.executor import check_executor
+from pipeline.stage.inspect_log import write_robot_log
+from pipeline.stage.paths import file_stem, stage_dir
+from pipeline.stage.run import StageRun, digest
+from pipeline.stage.state import files_fingerprint, fingerprint
+from retarget.clip import FPS, METHOD, retarget_clip
+from retarget.metrics import summarise
+from retarget.plot import plot_clip
 
 
 @dataclass(frozen=True)
@@ -47,105 +46,19 @@ class ClipResult:
     error: str | None = None
 
 
-def _link_map(clip: HumanClip, mapping) -> dict[str, str]:
-    from retarget.metrics import DEFAULT_LINK_MAP
-
-    names = set(clip.skeleton.joint_names)
-    return {
-        **{j: b for j, b in DEFAULT_LINK_MAP.items() if j in names},
-        **{link.joint: link.body for link in mapping.links},
-    }
-
-
-def retarget_clip(
-    clip: HumanClip, *, height_override: float | None = None, mapping_name: str | None = None
-) -> tuple[RobotClip, dict, dict]:
-    """(robot clip, metrics, scale summary) for one human clip."""
-    from retarget.contact import link_contact_flags
-    from retarget.ik import G1Retargeter
-    from retarget.mapping import load_mapping
-    from retarget.metrics import retarget_metrics
-    from retarget.objects import map_objects
-    from retarget.scaling import compute_scale, human_to_targets
-
-    if clip.frames < 2:
-        raise InputError(clip.source, "frames", f"a clip needs at least 2 frames, got {clip.frames}")
-    t0 = time.perf_counter()
-    human = clip.resampled(FPS)
-    mapping = load_mapping(human.skeleton, mapping_name, source=human.source)
-    info = compute_scale(human, mapping, height_override=height_override)
-    targets = human_to_targets(human, mapping, height_override=height_override, scale=info)
-    objects = map_objects(human, info, targets)
-    link_map = _link_map(human, mapping)
-    links, contacts = link_contact_flags(human, link_map)
-    targets = replace(targets, contact_links=links, object_contact=contacts if objects else None)
-    scene = build_scene([SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in objects])
-    ik = G1Retargeter(scene)
-    qpos = ik.retarget(targets, {o.name: o.pose for o in objects}, source=human.source)
-    objects = tuple(replace(o, pose=ik.objects_pose[o.name]) for o in objects)  # moved clear of planted feet
-    robot = RobotClip(
-        qpos,
-        FPS,
-        human.source,
-        objects=objects,
-        contact_links=links,
-        contacts=contacts,
-        method=METHOD,
-        task=human.task,
-        provenance={
-            "source": human.source,
-            "synthetic": human.synthetic,
-            "mapping": mapping.name,
-            "source_fps": clip.fps,
-        },
-    )
-    seconds = time.perf_counter() - t0
-    return robot, retarget_metrics(robot, human, link_map=link_map, seconds_wall=seconds), info.summary()
-
-
-def _cache_key(clip: HumanClip, index: int) -> str:
-    h = hashlib.sha256()
-    for a in (clip.joint_pos, *(o.pose for o in clip.objects)):
-        h.update(np.ascontiguousarray(a).tobytes())
-    h.update(f"{clip.source}|{index}|{clip.fps}|{METHOD}".encode())
-    return h.hexdigest()[:16]
-
-
-def _run_one(args: tuple[int, HumanClip, Path, float | None]) -> ClipResult:
-    index, clip, work, height_override = args
-    cached = work / f"{_cache_key(clip, index)}.pkl"
-    if cached.is_file():
-        return pickle.loads(cached.read_bytes())
+def retarget_one(item: tuple[int, HumanClip], height_override: float | None = None) -> ClipResult:
+    """:func:`retarget_clip` of the ``(index, clip)`` item; a bad clip's :class:`InputError` becomes its result."""
+    index, clip = item
     try:
         robot, metrics, scale = retarget_clip(clip, height_override=height_override)
-        result = ClipResult(index, clip.source, robot, metrics, scale)
     except InputError as exc:  # a bad clip is reported; the others go on
         return ClipResult(index, clip.source, None, {}, {}, error=str(exc))
-    tmp = cached.with_suffix(".tmp")
-    tmp.write_bytes(pickle.dumps(result))
-    tmp.replace(cached)
-    return result
+    return ClipResult(index, clip.source, robot, metrics, scale)
 
 
-def retarget_clips(
-    clips: list[HumanClip], work: Path, *, jobs: int = 1, height_override: float | None = None
-) -> list[ClipResult]:
-    """Retarget every clip (in ``jobs`` processes), resuming from the cache in ``work``."""
-    work.mkdir(parents=True, exist_ok=True)
-    tasks = [(i, c, work, height_override) for i, c in enumerate(clips)]
-    bar = tqdm(total=len(tasks), desc="retarget", unit="clip")
-    results: list[ClipResult] = []
-    if jobs <= 1:
-        for t in tasks:
-            results.append(_run_one(t))
-            bar.update()
-    else:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            for r in pool.map(_run_one, tasks):
-                results.append(r)
-                bar.update()
-    bar.close()
-    return sorted(results, key=lambda r: r.index)
+def _clip_key(k: int, item: tuple[int, HumanClip]) -> str:
+    clip = item[1]
+    return digest(k, clip.source, clip.fps, clip.joint_pos, *(o.pose for o in clip.objects))
 
 
 CARD_NOTES = [
@@ -179,9 +92,6 @@ def input_fingerprint(
     """What a run's output depends on (:mod:`pipeline.stage.state`): every input file's path, size and
     mtime (the embedded default: its generator's source code), the body model's, and the height
     override; not ``jobs``, which changes only the speed."""
-    from pipeline import default_input, synthetic
-    from pipeline.stage.state import files_fingerprint, fingerprint
-
     if input_path is None:
         generator = [Path(default_input.__file__), *sorted(Path(synthetic.__file__).parent.glob("*.py"))]
         source = "embedded default " + files_fingerprint(generator, by_content=True)
@@ -193,41 +103,49 @@ def input_fingerprint(
     )
 
 
+def _card(name: str, done: list[ClipResult], features) -> DatasetCard:
+    synthetic_ = any(r.robot.provenance.get("synthetic") for r in done)
+    return DatasetCard(
+        title=f"{name}: G1 retargeted motion",
+        description=("SYNTHETIC human-object demonstrations, " if synthetic_ else "Human(-object) motion capture, ")
+        + "retargeted to the Unitree G1 by interaction-preserving mink IK (kinematic: not yet physically simulated).",
+        provenance=[r.source for r in done],
+        fps=FPS,
+        synthetic=synthetic_,
+        stage="retargeted",
+        license="apache-2.0" if synthetic_ else "other",
+        feature_frames=_feature_frames(features),
+        notes=CARD_NOTES,
+    )
+
+
 def run_stage(
     input_path: str | None,
     name: str,
     *,
     overwrite: bool = False,
     jobs: int = 1,
+    executor: str = "local",
     body_model: str | None = None,
     height_override: float | None = None,
 ) -> dict:
     """``lessmimic retarget``: ingest, retarget every clip, write the dataset, report and logs. Without
-    ``overwrite``, an existing dataset whose report records this run's :func:`input_fingerprint` is up
+    ``overwrite``, a finished run on the same input with the same options (:func:`input_fingerprint`) is up
     to date: its report comes back with ``"up_to_date": True`` and nothing is done."""
-    from pipeline.dataset.card import DatasetCard
-    from pipeline.dataset.clips import robot_clips_to_episodes
-    from pipeline.dataset.write import check_target, write_dataset
-    from pipeline.ingest import ingest
-    from pipeline.stage.atomic import write_json_atomic
-    from pipeline.stage.inspect_log import write_robot_log
-    from pipeline.stage.paths import file_stem, stage_dir
-    from pipeline.stage.state import KEY, up_to_date
-    from retarget.metrics import summarise
-    from retarget.plot import plot_clip
-
-    out = stage_dir(name, "retargeted")
-    fp = input_fingerprint(input_path, body_model=body_model, height_override=height_override)
-    recorded = None if overwrite or not out.is_dir() else up_to_date(out / "report.json", fp)
-    if recorded is not None:
-        return {**recorded, "up_to_date": True}
-    check_target(out, overwrite)
+    check_executor(executor, jobs)
+    run = StageRun(
+        stage_dir(name, "retargeted"),
+        input_fingerprint(input_path, body_model=body_model, height_override=height_override),
+    )
+    if not overwrite and (done := run.finished()) is not None:
+        return {**done, "up_to_date": True}
+    run.begin(overwrite)
     t0 = time.perf_counter()
-    work = out.parent / ".work" / "retarget"
-    if overwrite:  # a fresh run; without --overwrite an interrupted run resumes from `work`
-        shutil.rmtree(work, ignore_errors=True)
     human = ingest(input_path, name, overwrite=True, body_model=body_model)
-    results = retarget_clips(list(human.clips), work, jobs=jobs, height_override=height_override)
+    retarget = partial(retarget_one, height_override=height_override)
+    results = run.map(
+        retarget, list(enumerate(human.clips)), key=_clip_key, jobs=jobs, executor=executor, desc="retarget"
+    )
     done = [r for r in results if r.robot is not None]
     failed = [{"episode": r.index, "source": r.source, "error": r.error} for r in results if r.robot is None]
     for r in failed:
@@ -240,32 +158,21 @@ def run_stage(
         "clips": [{"source": r.source, "task": r.robot.task, **r.metrics, "scale": r.scale} for r in done],
         "failed": failed,
         "summary": summarise([r.metrics for r in done]) if done else {},
-        KEY: fp,
     }
-    if done:
-        synthetic = any(r.robot.provenance.get("synthetic") for r in done)
-        features, episodes = robot_clips_to_episodes([r.robot for r in done])
-        card = DatasetCard(
-            title=f"{name}: G1 retargeted motion",
-            description=("SYNTHETIC human-object demonstrations, " if synthetic else "Human(-object) motion capture, ")
-            + "retargeted to the Unitree G1 by interaction-preserving mink IK (kinematic: not yet physically "
-            "simulated).",
-            provenance=[r.source for r in done],
-            fps=FPS,
-            synthetic=synthetic,
-            stage="retargeted",
-            license="apache-2.0" if synthetic else "other",
-            feature_frames=_feature_frames(features),
-            notes=CARD_NOTES,
-        )
-        write_dataset(out, f"lessmimic/{name}-retargeted", FPS, features, episodes, card=card, overwrite=overwrite)
-        logs = out.parent / "logs" / "retargeted"
-        for k, r in enumerate(tqdm(done, desc="logs and plots", unit="clip")):
-            stem = f"{k:03d}_{file_stem(r.source)}"
-            write_robot_log(r.robot, logs / f"{stem}.mcap")
-            plot_clip(r.robot, human.clips[r.index].resampled(FPS), logs / f"{stem}.png")
-        write_json_atomic(
-            out / "report.json", {**report, "seconds_wall": time.perf_counter() - t0}
-        )  # last: its fingerprint marks a finished run
-        shutil.rmtree(work, ignore_errors=True)  # finished: the resume cache has served its purpose
-    return report
+    if not done:  # nothing to write: not a finished run (a rerun tries again)
+        return report
+    features, episodes = robot_clips_to_episodes([r.robot for r in done])
+    write_dataset(
+        run.out,
+        f"lessmimic/{name}-retargeted",
+        FPS,
+        features,
+        episodes,
+        card=_card(name, done, features),
+        overwrite=run.replaces,
+    )
+    for k, r in enumerate(tqdm(done, desc="logs and plots", unit="clip")):
+        stem = f"{k:03d}_{file_stem(r.source)}"
+        write_robot_log(r.robot, run.logs / f"{stem}.mcap")
+        plot_clip(r.robot, human.clips[r.index].resampled(FPS), run.logs / f"{stem}.png")
+    return run.finish({**report, "seconds_wall": time.perf_counter() - t0}, dataset_written=True)

@@ -62,7 +62,7 @@ def test_default_chain_retarget_physicalize_features(tmp_path, monkeypatch, caps
     err = capsys.readouterr().err
     assert "--overwrite" in err and err.count("\n") == 1
     assert LeRobotDataset("lessmimic/default-human", root=root).num_frames == ds.num_frames
-    assert not (tmp_path / "default" / ".work" / "retarget").exists()  # resume cache removed when finished
+    assert not (tmp_path / "default" / ".work" / "retargeted").exists()  # resume cache removed when finished
     code = main(["physicalize"])  # every clip is simulated, valid or not, and reported
     report = json.loads((tmp_path / "default" / "logs" / "physicalized" / "report.json").read_text())
     assert [c["task"] for c in report["clips"]] == ["PickUp", "SitStand", "Push", "Carry"]

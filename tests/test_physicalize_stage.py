@@ -9,7 +9,7 @@ from mocap_paths import SHARED_MOCAP, needs_shared
 from lessmimic.cli import main
 from physicalize.clip import NO_RETRY_GRIP_OUT, physicalize_clip
 from physicalize.reference import place_on_floor
-from physicalize.stage import _run_one
+from physicalize.stage import _clip_key, physicalize_one
 from physicalize.wbc_config import TEACHER_GAINS, WBCConfig
 from pipeline.clip import ObjectTrack, RobotClip
 from pipeline.dataset import write_dataset
@@ -18,6 +18,7 @@ from pipeline.geometry import Primitive
 from pipeline.robot import actuator_profile, default_qpos
 from pipeline.scene import build_scene
 from pipeline.stage.paths import stage_dir
+from pipeline.stage.run import StageRun
 
 BOX = Primitive("box", (0.15, 0.15, 0.15))
 
@@ -113,7 +114,7 @@ def test_the_next_gain_set_is_tried_when_a_rollout_is_invalid():
 def test_a_reference_the_hands_cannot_follow_is_not_retried():
     """The InterMimic table is dragged towards the body by hands that can only press: no gain set can follow it."""
     from pipeline.readers import read_clips
-    from retarget.stage import retarget_clip
+    from retarget.clip import retarget_clip
 
     clip = retarget_clip(read_clips(SHARED_MOCAP / "intermimic" / "sub2_largetable_000.pt")[0])[0]
     _, _, f, _ = physicalize_clip(clip)
@@ -138,55 +139,9 @@ def test_bad_arguments_are_one_line_errors(retargeted, capsys):
 
 def test_a_finished_clip_is_resumed_from_the_cache(tmp_path):
     clip = _clips()[0]
-    first = _run_one(0, clip, tmp_path, "base", "mjlab")
-    assert len(list(tmp_path.glob("*.pkl"))) == 1
-    again = _run_one(0, clip, tmp_path, "base", "mjlab")
+    run = StageRun(tmp_path / "physicalized", "fp")
+    run.begin(overwrite=False)
+    first = run.map(physicalize_one, [(0, clip)], key=_clip_key)[0]
+    assert len(list(run.clips.glob("*.pkl"))) == 1
+    again = run.map(physicalize_one, [(0, clip)], key=_clip_key)[0]
     assert np.array_equal(first.rollout.action, again.rollout.action) and again.figures == first.figures
-
-
-@pytest.mark.slow
-def test_kill_9_mid_run_then_rerun_gives_the_same_dataset(tmp_path):
-    """A run killed (SIGKILL) after its first clip resumes from the cache and writes the dataset a clean run writes."""
-    import os
-    import signal
-    import subprocess
-    import sys
-    import time
-
-    import pandas as pd
-
-    roots = {}
-    for run in ("killed", "clean"):
-        root = roots[run] = tmp_path / run
-        features, episodes = robot_clips_to_episodes(_clips())
-        env = {**os.environ, "LESSMIMIC_DATASETS": str(root), "HF_HUB_OFFLINE": "1"}
-        cmd = [sys.executable, "-m", "lessmimic.cli", "physicalize", "--name", "hand", "--keep-invalid"]
-        os.environ["LESSMIMIC_DATASETS"] = str(root)
-        try:
-            write_dataset(stage_dir("hand", "retargeted"), "lessmimic/hand-retargeted", 50, features, episodes)
-        finally:
-            del os.environ["LESSMIMIC_DATASETS"]
-        if run == "killed":
-            proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            cache = root / "hand" / ".work" / "physicalize"
-            deadline = time.monotonic() + 300
-            while not list(cache.glob("*.pkl")) and proc.poll() is None and time.monotonic() < deadline:
-                time.sleep(0.05)
-            assert proc.poll() is None, "the run finished before it could be killed"
-            os.kill(proc.pid, signal.SIGKILL)
-            proc.wait()
-            assert len(list(cache.glob("*.pkl"))) == 1 and not (root / "hand" / "physicalized").exists()
-        assert subprocess.run(cmd, env=env, capture_output=True).returncode == 0
-    data = {
-        run: pd.concat([pd.read_parquet(p) for p in sorted((r / "hand" / "physicalized" / "data").rglob("*.parquet"))])
-        for run, r in roots.items()
-    }
-    assert data["clean"]["episode_index"].nunique() == 2
-    pd.testing.assert_frame_equal(data["killed"], data["clean"])
-    reports = {
-        run: json.loads((r / "hand" / "physicalized" / "report.json").read_text())["clips"] for run, r in roots.items()
-    }
-    timing = ("realtime_factor", "realtime_factor_per_core")
-    assert [{k: v for k, v in c.items() if k not in timing} for c in reports["killed"]] == [
-        {k: v for k, v in c.items() if k not in timing} for c in reports["clean"]
-    ]

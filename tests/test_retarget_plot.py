@@ -3,8 +3,8 @@
 import numpy as np
 
 from pipeline.default_input import default_clips
+from retarget.clip import FPS, retarget_clip
 from retarget.plot import clip_series, plot_clip
-from retarget.stage import FPS, retarget_clip
 
 
 def test_push_plot(tmp_path):

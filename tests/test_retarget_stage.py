@@ -5,7 +5,9 @@ import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 
 from pipeline.errors import InputError
-from retarget.stage import retarget_clip, retarget_clips
+from pipeline.stage.run import StageRun
+from retarget.clip import retarget_clip
+from retarget.stage import _clip_key, retarget_one
 
 BARS = {
     "object_penetration_frac_1cm": (0.0, 0.0),
@@ -70,9 +72,12 @@ def test_short_clip_is_reported_and_others_go_on(tmp_path):
     short = type(good)(good.skeleton, good.joint_pos[:1], good.fps, "short.bvh")
     with pytest.raises(InputError, match=r"short\.bvh: frames: a clip needs at least 2 frames"):
         retarget_clip(short)
-    results = retarget_clips([short, good], tmp_path)
+    run = StageRun(tmp_path / "retargeted", "fp")
+    run.begin(overwrite=False)
+    results = run.map(retarget_one, [(0, short), (1, good)], key=_clip_key)
     assert results[0].robot is None and "at least 2 frames" in results[0].error
     assert results[1].robot is not None
     # resume: the finished clip is read back from the cache, identical
-    again = retarget_clips([short, good], tmp_path)
+    assert len(list(run.clips.glob("*.pkl"))) == 2
+    again = run.map(retarget_one, [(0, short), (1, good)], key=_clip_key)
     np.testing.assert_array_equal(again[1].robot.qpos, results[1].robot.qpos)

@@ -1,11 +1,11 @@
-"""Is a stage's output up to date? Each stage records in its ``report.json`` a ``fingerprint``
-of what it was run on (its input files or dataset and the options that change its output); a
-rerun with the same fingerprint finds the output up to date and does nothing.
+"""Fingerprints: what a stage's output depends on. Each stage records in its ``report.json`` a
+``fingerprint`` of what it was run on (its input files or the previous stage's dataset, and the
+options that change its output); a rerun with the same fingerprint finds the output up to date and
+does nothing (the rule itself: :meth:`pipeline.stage.run.StageRun.finished`).
 
-A stage calls, in order: :func:`fingerprint` over its parts (:func:`files_fingerprint` for input
-files, :func:`dataset_fingerprint` for the previous stage's dataset, plain values for options),
-then :func:`up_to_date` with the report it wrote last time; it records the fingerprint under
-:data:`KEY` in the report it writes.
+A stage builds its fingerprint with :func:`fingerprint` over its parts (:func:`files_fingerprint`
+for input files, :func:`dataset_fingerprint` for the previous stage's dataset, plain values for
+options); :func:`up_to_date` reads a report (or a run's ``run.json``) back if it records one.
 """
 
 from __future__ import annotations

@@ -1,0 +1,70 @@
+"""Retarget one human clip to the G1: resample it to the control rate (:data:`FPS`), pick its mapping
+(:mod:`retarget.mapping`), compute the scale and the IK targets (:mod:`retarget.scaling`), map the objects
+into the robot's world (:mod:`retarget.objects`), solve the IK in a scene built with the same collision
+model as the physics (:mod:`retarget.ik`), label per-link contacts from the human's (:mod:`retarget.contact`)
+and measure it (:func:`retarget.metrics.retarget_metrics`)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+from pipeline.clip import HumanClip, RobotClip
+from pipeline.errors import InputError
+from pipeline.scene import SceneObject, build_scene
+from retarget.contact import link_contact_flags
+from retarget.ik import G1Retargeter
+from retarget.mapping import load_mapping
+from retarget.metrics import DEFAULT_LINK_MAP, retarget_metrics
+from retarget.objects import map_objects
+from retarget.scaling import compute_scale, human_to_targets
+
+FPS = 50
+METHOD = "lessmimic-mink"
+
+
+def _link_map(clip: HumanClip, mapping) -> dict[str, str]:
+    names = set(clip.skeleton.joint_names)
+    return {
+        **{j: b for j, b in DEFAULT_LINK_MAP.items() if j in names},
+        **{link.joint: link.body for link in mapping.links},
+    }
+
+
+def retarget_clip(
+    clip: HumanClip, *, height_override: float | None = None, mapping_name: str | None = None
+) -> tuple[RobotClip, dict, dict]:
+    """(robot clip, metrics, scale summary) for one human clip."""
+    if clip.frames < 2:
+        raise InputError(clip.source, "frames", f"a clip needs at least 2 frames, got {clip.frames}")
+    t0 = time.perf_counter()
+    human = clip.resampled(FPS)
+    mapping = load_mapping(human.skeleton, mapping_name, source=human.source)
+    info = compute_scale(human, mapping, height_override=height_override)
+    targets = human_to_targets(human, mapping, height_override=height_override, scale=info)
+    objects = map_objects(human, info, targets)
+    link_map = _link_map(human, mapping)
+    links, contacts = link_contact_flags(human, link_map)
+    targets = replace(targets, contact_links=links, object_contact=contacts if objects else None)
+    scene = build_scene([SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in objects])
+    ik = G1Retargeter(scene)
+    qpos = ik.retarget(targets, {o.name: o.pose for o in objects}, source=human.source)
+    objects = tuple(replace(o, pose=ik.objects_pose[o.name]) for o in objects)  # moved clear of planted feet
+    robot = RobotClip(
+        qpos,
+        FPS,
+        human.source,
+        objects=objects,
+        contact_links=links,
+        contacts=contacts,
+        method=METHOD,
+        task=human.task,
+        provenance={
+            "source": human.source,
+            "synthetic": human.synthetic,
+            "mapping": mapping.name,
+            "source_fps": clip.fps,
+        },
+    )
+    seconds = time.perf_counter() - t0
+    return robot, retarget_metrics(robot, human, link_map=link_map, seconds_wall=seconds), info.summary()
