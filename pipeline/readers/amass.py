@@ -30,60 +30,19 @@ from pipeline.readers.keypoints import load_npz
 from pipeline.rotations import wxyz_from_rotation
 
 SMPLH_FINGERS = tuple(f"{f}{k}" for f in ("index", "middle", "pinky", "ring", "thumb") for k in (1, 2, 3))
+#: The 22 joints of the SMPL body (SMPL-H and SMPL-X share them, in this order, before the hands) and their parents.
+SMPL_BODY_JOINT_NAMES: tuple[str, ...] = (
+    "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2", "left_ankle", "right_ankle",
+    "spine3", "left_foot", "right_foot", "neck", "left_collar", "right_collar", "head", "left_shoulder",
+    "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist",
+)  # fmt: skip
+SMPL_BODY_PARENTS: tuple[int, ...] = (-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19)
 SMPLH_JOINT_NAMES: tuple[str, ...] = (
-    (
-        "pelvis",
-        "left_hip",
-        "right_hip",
-        "spine1",
-        "left_knee",
-        "right_knee",
-        "spine2",
-        "left_ankle",
-        "right_ankle",
-        "spine3",
-        "left_foot",
-        "right_foot",
-        "neck",
-        "left_collar",
-        "right_collar",
-        "head",
-        "left_shoulder",
-        "right_shoulder",
-        "left_elbow",
-        "right_elbow",
-        "left_wrist",
-        "right_wrist",
-    )
-    + tuple(f"left_{f}" for f in SMPLH_FINGERS)
-    + tuple(f"right_{f}" for f in SMPLH_FINGERS)
+    SMPL_BODY_JOINT_NAMES + tuple(f"left_{f}" for f in SMPLH_FINGERS) + tuple(f"right_{f}" for f in SMPLH_FINGERS)
 )
 _FINGER_PARENTS = tuple(p for _ in range(5) for p in (-1, 0, 1))  # wrist, then within a finger
 SMPLH_PARENTS: tuple[int, ...] = (
-    (
-        -1,
-        0,
-        0,
-        0,
-        1,
-        2,
-        3,
-        4,
-        5,
-        6,
-        7,
-        8,
-        9,
-        9,
-        9,
-        12,
-        13,
-        14,
-        16,
-        17,
-        18,
-        19,
-    )
+    SMPL_BODY_PARENTS
     + tuple(20 if p < 0 else 22 + 3 * (k // 3) + p for k, p in enumerate(_FINGER_PARENTS))
     + tuple(21 if p < 0 else 37 + 3 * (k // 3) + p for k, p in enumerate(_FINGER_PARENTS))
 )

@@ -20,33 +20,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pipeline.clip import Skeleton
+from pipeline.readers.amass import SMPL_BODY_JOINT_NAMES, SMPL_BODY_PARENTS
 from pipeline.rotations import wxyz_from_rotation
 
-JOINT_NAMES = (
-    "pelvis",
-    "left_hip",
-    "right_hip",
-    "spine1",
-    "left_knee",
-    "right_knee",
-    "spine2",
-    "left_ankle",
-    "right_ankle",
-    "spine3",
-    "left_foot",
-    "right_foot",
-    "neck",
-    "left_collar",
-    "right_collar",
-    "head",
-    "left_shoulder",
-    "right_shoulder",
-    "left_elbow",
-    "right_elbow",
-    "left_wrist",
-    "right_wrist",
-)
-PARENTS = (-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19)
+JOINT_NAMES, PARENTS = SMPL_BODY_JOINT_NAMES, SMPL_BODY_PARENTS  # an SMPL body: readers and retargeting treat it as one
 SKELETON = Skeleton(JOINT_NAMES, PARENTS)
 J = {name: i for i, name in enumerate(JOINT_NAMES)}
 SUBJECT_HEIGHT = 1.70
