@@ -17,7 +17,7 @@ RUN_ARGS = -j $(JOBS) --executor $(EXECUTOR)
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install lint format retarget physicalize train-residual features test test-fast bench bench-retarget bench-physicalize bench-features clean-venv
+.PHONY: install lint format retarget physicalize train-residual features test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-features clean-venv
 
 install: $(VENV)/.installed
 
@@ -72,6 +72,11 @@ bench-retarget: install
 
 bench-physicalize: install
 	$(PY) bench/bench_physicalize.py
+
+# Real mocap: every clip of FOLDERS (default: ../shared/mocap interact, omomo, intermimic), valid / rejected / failed.
+FOLDERS ?=
+bench-physicalize-real: install
+	$(PY) bench/bench_physicalize_real.py $(FOLDERS) -j $(JOBS)
 
 bench-features: install
 	$(PY) bench/bench_features.py

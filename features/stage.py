@@ -26,6 +26,7 @@ from features.plot import plot_df
 from pipeline.clip import PhysicalizedClip
 from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.clips import episodes_to_physicalized_clips, physicalized_clips_to_episodes
+from pipeline.dataset.objects import objects_note
 from pipeline.dataset.read import read_card
 from pipeline.dataset.schema import Feature
 from pipeline.dataset.write import write_dataset
@@ -192,7 +193,9 @@ def _card(name: str, src: Path, clips: list[PhysicalizedClip]) -> DatasetCard:
         actuator_profile=prev.actuator_profile if prev else "",
         license=prev.license if prev else "other",
         feature_frames={**(prev.feature_frames if prev else {}), **_FRAMES},
-        notes=(prev.notes if prev else []) + CARD_NOTES,
+        notes=[n for n in (prev.notes if prev else []) if not n.startswith("Objects are columns")]
+        + CARD_NOTES
+        + [objects_note([c.robot for c in clips])],
     )
 
 

@@ -18,7 +18,7 @@ import numpy as np
 from physicalize.problem import tracking_problem
 from physicalize.rollout import Rollout, initial_state, replay, simulate
 from physicalize.static_torque import static_torque_figures
-from physicalize.validate import validate
+from physicalize.validate import failure_class, validate
 from physicalize.wbc import WholeBodyController
 from physicalize.wbc_config import TEACHER_GAINS, WBCConfig
 from pipeline.clip import RobotClip
@@ -69,14 +69,25 @@ def load_residual(path: str, digest: str):
     return _RESIDUALS[(path, digest)]
 
 
-def _reference_figures(scene, ref, fps: float) -> tuple[dict, str]:
+def first_contact_s(clip: RobotClip) -> float | None:
+    """When the clip's robot first touches an object (any contact link or object contact flag), None if never."""
+    flags = [o.contact for o in clip.objects if o.contact is not None]
+    if clip.contacts is not None and clip.contacts.size:
+        flags.append(clip.contacts.any(axis=1))
+    touching = np.flatnonzero(np.any(flags, axis=0)) if flags else np.zeros(0, int)
+    return float(touching[0] / clip.fps) if touching.size else None
+
+
+def _reference_figures(scene, ref, clip: RobotClip) -> tuple[dict, str]:
     """What the tracked reference asks beyond the robot, the same for every rollout of it: the static
     upper-body torque (:mod:`physicalize.static_torque`) and the share of held frames whose planned hand
-    forces leave the friction cones; with the cause an invalid rollout's reason names ("" when none)."""
+    forces leave the friction cones; with the cause an invalid rollout's reason names ("" when none); and
+    when the reference first touches an object (``reference_first_contact_s``, for the failure class)."""
+    fps = clip.fps
     loads = None if ref.grasp is None else (ref.grasp.offset, ref.grasp.force)
-    figures = static_torque_figures(
-        ref.qpos, loads, scene.profile.effort_limit, fps
-    )  # what the reference asks of the upper body
+    # what the reference asks of the upper body
+    figures = static_torque_figures(ref.qpos, loads, scene.profile.effort_limit, fps)
+    figures["reference_first_contact_s"] = first_contact_s(clip)
     if ref.grasp is None:
         held = outside = np.zeros(0, bool)
     else:
@@ -107,6 +118,7 @@ def _figures(
         figures["reason"] = "; ".join(
             filter(None, [figures["reason"], f"replay error {figures['replay_err_max_m']:.3g} m > {REPLAY_TOL_M:g}"])
         )
+    figures["failure"] = failure_class(figures)
     return figures
 
 
@@ -137,7 +149,7 @@ def physicalize_clip(
     scene, ref, objects, zmp = tracking_problem(clip, profile, reference, grasp)
     qpos0, qvel0 = initial_state(scene, ref, objects)
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0  # planning + tracking (not the checks)
-    ref_figures = _reference_figures(scene, ref, clip.fps)
+    ref_figures = _reference_figures(scene, ref, clip)
     if ref_figures[0]["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT:
         gains = gains[:1]  # no gains make a pressing hand pull
     tried = []

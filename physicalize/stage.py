@@ -26,6 +26,7 @@ from physicalize.validate import summarise
 from pipeline.clip import PhysicalizedClip, RobotClip
 from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.clips import episodes_to_robot_clips, physicalized_clips_to_episodes
+from pipeline.dataset.objects import objects_note
 from pipeline.dataset.write import write_dataset
 from pipeline.errors import InputError
 from pipeline.robot import FREE_NV, NV_ROBOT, ActuatorProfile, actuator_profile
@@ -55,7 +56,7 @@ def physicalize_one(item: tuple[int, RobotClip], teacher: str = "base", profile:
         robot, roll, figures, com = physicalize_clip(clip, profile=profile, teacher=teacher)
     except Exception as exc:  # noqa: BLE001 - a clip that cannot be simulated is reported, the batch goes on
         reason = f"error: {type(exc).__name__}: {exc}"
-        return ClipResult(index, clip.source, None, None, {"valid": False, "reason": reason}, {})
+        return ClipResult(index, clip.source, None, None, {"valid": False, "reason": reason, "failure": "error"}, {})
     return ClipResult(index, clip.source, robot, roll, figures, {**com, "reference_qpos": clip.qpos})
 
 
@@ -176,8 +177,8 @@ def _card(name: str, kept: list[ClipResult], src: Path, spec: TeacherSpec, teach
         stage="physicalized",
         actuator_profile=f"{prof.name}: {prof.description}",
         license="apache-2.0" if synthetic else "other",
-        feature_frames={f.name: "world, z-up" if f.name.startswith("object.") else "" for f in features},
-        notes=CARD_NOTES + [teacher_note],
+        feature_frames={f.name: "world, z-up" if f.name.startswith("object") else "" for f in features},
+        notes=CARD_NOTES + [teacher_note, objects_note([r.robot for r in kept])],
     )
 
 

@@ -138,9 +138,56 @@ def validate(
     for key, bar in asdict(bars).items():
         if key in figures and figures[key] > bar + 1e-12:
             reasons.append(f"{key} {figures[key]:.4g} > {bar:g}")
+    figures["fell_at_s"] = None if rollout.fell_at is None else rollout.fell_at / fps
+    figures["object_lost_at_s"] = None if lost_at is None else lost_at / fps
     figures["valid"] = not reasons
     figures["reason"] = "; ".join(reasons)
     return figures
+
+
+CONTACT_WINDOW_S = 1.0  # a fall this soon after the reference's first contact is a fall at contact
+FAILURE_CLASSES = (
+    "fell before contact",
+    "fell at contact",
+    "fell while interacting",
+    "object lost",
+    "joint limits",
+    "penetration",
+    "foot sliding",
+    "tracking error",
+    "error",
+)
+
+
+def failure_class(figures: dict, bars: Bars = Bars()) -> str | None:
+    """Why an invalid clip failed, one of :data:`FAILURE_CLASSES` (None when valid): the first thing that went
+    wrong. An object lost before the robot fell (or without a fall) is ``object lost``; a fall is classed by
+    when it came relative to the reference's first robot-object contact (``reference_first_contact_s``): before
+    it (approach or locomotion), within :data:`CONTACT_WINDOW_S` of it, or later; without a fall or a loss, the
+    first bar exceeded (joint limits, penetration, foot sliding, else the tracking errors)."""
+    if figures.get("valid"):
+        return None
+    if str(figures.get("reason", "")).startswith("error:"):
+        return "error"
+    fell, lost, onset = (
+        figures.get("fell_at_s"),
+        figures.get("object_lost_at_s"),
+        figures.get("reference_first_contact_s"),
+    )
+    if lost is not None and (fell is None or lost < fell):
+        return "object lost"
+    if fell is not None:
+        if onset is None or fell < onset:
+            return "fell before contact"
+        return "fell at contact" if fell < onset + CONTACT_WINDOW_S else "fell while interacting"
+    for key, name in (
+        ("joint_limit_violation_frac", "joint limits"),
+        ("penetration_max_m", "penetration"),
+        ("foot_slide_frac_1cm_per_frame", "foot sliding"),
+    ):
+        if figures.get(key, 0.0) > getattr(bars, key) + 1e-12:
+            return name
+    return "tracking error"
 
 
 NOT_AVERAGED = ("episode",)  # an index, not a figure

@@ -16,6 +16,7 @@ from tqdm import tqdm
 from pipeline.clip import HumanClip
 from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.clips import human_clips_to_episodes
+from pipeline.dataset.objects import objects_note
 from pipeline.dataset.write import check_target, write_dataset
 from pipeline.default_input import default_clips
 from pipeline.readers import read_clips
@@ -70,9 +71,12 @@ def ingest(
         stage="human",
         # Our own synthetic demos are Apache-2.0; user mocap keeps its source's terms.
         license="apache-2.0" if all(c.synthetic for c in clips) else "other",
-        notes=[]
-        if all(c.synthetic for c in clips)
-        else ["Derived from the sources listed above: their licence terms apply."],
+        notes=(
+            []
+            if all(c.synthetic for c in clips)
+            else ["Derived from the sources listed above: their licence terms apply."]
+        )
+        + [objects_note(clips)],
     )
     write_dataset(out, f"lessmimic/{name}-human", HUMAN_FPS, features, episodes, card=card, overwrite=overwrite)
     from lerobot.datasets.lerobot_dataset import LeRobotDataset

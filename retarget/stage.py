@@ -21,6 +21,7 @@ from pipeline import default_input, synthetic
 from pipeline.clip import HumanClip, RobotClip
 from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.clips import robot_clips_to_episodes
+from pipeline.dataset.objects import objects_note
 from pipeline.dataset.write import write_dataset
 from pipeline.errors import InputError
 from pipeline.ingest import ingest
@@ -67,7 +68,7 @@ CARD_NOTES = [
     "`contact` labels, per robot link, the frames where the human touches an object (a human joint within 2 cm of the "
     "object surface) with a joint mapped to that link; the retargeting brings the link to the object surface on those "
     "frames.",
-    "`object.<name>.pose` is each object's pose (position, quaternion wxyz) in the robot's world: real size, placement "
+    "`object.pose` is the clip's object's pose (position, quaternion wxyz) in the robot's world: real size, placement "
     "following the scaled interaction, moved clear of the robot's planted feet where needed.",
     "`source_frame` is the index of the nearest frame of the source take (at the take's own frame rate).",
     "Per-clip quality figures (penetration, floating, foot sliding, contact preservation, joint limits and speed) "
@@ -115,7 +116,7 @@ def _card(name: str, done: list[ClipResult], features) -> DatasetCard:
         stage="retargeted",
         license="apache-2.0" if synthetic_ else "other",
         feature_frames=_feature_frames(features),
-        notes=CARD_NOTES,
+        notes=[*CARD_NOTES, objects_note([r.robot for r in done])],
     )
 
 

@@ -69,7 +69,7 @@ def test_features_dataset_loads_with_interaction_windows(tmp_path, monkeypatch, 
         ("observation.root_command", 12),
         ("observation.proprio", 93),
         ("action", 29),
-        ("object.box.pose", 7),
+        ("object.pose", 7),
         ("observation.state", 36),
     ):
         assert tuple(ds.features[key]["shape"]) == (dim,)

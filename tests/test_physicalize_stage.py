@@ -68,8 +68,8 @@ def test_valid_clip_written_invalid_one_reported(retargeted, capsys):
         ("observation.torque", 29),
         ("observation.state", 36),
         ("observation.qvel", 35),
-        ("object.box.pose", 7),
-        ("object.box.vel", 6),
+        ("object.pose", 7),
+        ("object.vel", 6),
         ("reference.state", 36),
     ):
         assert tuple(ds.features[key]["shape"]) == (dim,)

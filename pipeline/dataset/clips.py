@@ -8,8 +8,9 @@ Robot datasets (:func:`robot_clips_to_episodes`, :func:`episodes_to_robot_clips`
   (:func:`pipeline.kinematics.qvel_from_qpos`): root linear velocity in the world frame (m/s),
   root angular velocity in the body (pelvis) frame (rad/s), joint velocities (rad/s);
 * ``contact`` -- per contact link, ``True`` when the link touches an object (if the clips name links);
-* ``object.<name>.pose`` -- object pose (x, y, z, qw, qx, qy, qz) in the world frame, and
-  ``object.<name>.contact`` (1 bool) when any clip has contact flags for that object
+* ``object.pose`` -- the clip's object's pose (x, y, z, qw, qx, qy, qz) in the world frame, and
+  ``object.contact`` (1 bool) when any clip has contact flags for it (further objects: ``object_2.*``, ...;
+  columns by role, the object's identity in the episode meta: :mod:`pipeline.dataset.objects`)
   (:mod:`pipeline.dataset.objects`);
 * ``source_frame`` -- frame index in the source motion: ``t + provenance["source_frame_start"]``
   (0 when absent).
@@ -17,7 +18,7 @@ Robot datasets (:func:`robot_clips_to_episodes`, :func:`episodes_to_robot_clips`
 Physicalized datasets (:func:`physicalized_clips_to_episodes`, :func:`episodes_to_physicalized_clips`):
 the robot features with ``observation.qvel`` from the simulation, plus ``action`` (29 joint position
 targets), ``observation.torque`` (29), ``observation.foot_force`` (left, right), ``reference.state``
-(the retargeted ``qpos`` tracked) and ``object.<name>.vel`` (linear world, angular body); the
+(the retargeted ``qpos`` tracked) and ``object.vel`` (linear world, angular body); the
 validation figures go into the episode metadata.
 
 Human datasets (:func:`human_clips_to_episodes`, :func:`episodes_to_human_clips`):
@@ -25,8 +26,9 @@ Human datasets (:func:`human_clips_to_episodes`, :func:`episodes_to_human_clips`
 ``<joint>.qw`` ..., when the clips have orientations), ``contact`` (J), the object features and
 ``source_frame``; the skeleton lives in the per-episode sidecar metadata.
 
-All clips of one dataset must share the fps (an integer: LeRobot stores integer fps), the object
-names, the contact links and (human) the skeleton, because a dataset has one feature spec.
+All clips of one dataset must share the fps (an integer: LeRobot stores integer fps), the number of
+objects (not which: columns are by role), the contact links and (human) the skeleton, because a dataset
+has one feature spec.
 Object geometry, masses, sources, provenance and per-clip presence flags go into the per-episode
 ``meta`` (``meta/lessmimic_episodes.jsonl``); reading back restores the clips exactly up to float32.
 """
@@ -40,7 +42,13 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.clip import HumanClip, PhysicalizedClip, RobotClip, Skeleton
-from pipeline.dataset.objects import object_data, object_features, objects_from_episode
+from pipeline.dataset.objects import (
+    episode_column,
+    object_column,
+    object_data,
+    object_features,
+    objects_from_episode,
+)
 from pipeline.dataset.read import iter_episodes, read_info
 from pipeline.dataset.schema import Episode, Feature
 from pipeline.errors import InputError
@@ -194,16 +202,10 @@ def physicalized_clips_to_episodes(clips: Sequence[PhysicalizedClip]) -> tuple[l
         ),
         Feature("reference.state", "float32", QPOS_NAMES, "retargeted qpos tracked at this frame", "m, rad"),
     ]
-    names = [o.name for o in clips[0].robot.objects]
+    columns = [object_column(k) for k in range(len(clips[0].robot.objects))]
     features += [
-        Feature(
-            f"object.{n}.vel",
-            "float32",
-            _VEL_NAMES,
-            f"object {n!r} velocity (linear world, angular body)",
-            "m/s, rad/s",
-        )
-        for n in names
+        Feature(f"{col}.vel", "float32", _VEL_NAMES, f"{col} velocity (linear world, angular body)", "m/s, rad/s")
+        for col in columns
     ]
     for ep, c in zip(episodes, clips):
         ep.data.update(
@@ -215,7 +217,7 @@ def physicalized_clips_to_episodes(clips: Sequence[PhysicalizedClip]) -> tuple[l
                 "reference.state": c.reference_qpos,
             }
         )
-        ep.data.update({f"object.{n}.vel": v for n, v in zip(names, c.object_vel)})
+        ep.data.update({f"{col}.vel": v for col, v in zip(columns, c.object_vel)})
         ep.meta.update({"stage": "physicalized", "validation": c.validation})
     return features, episodes
 
@@ -239,7 +241,7 @@ def episodes_to_physicalized_clips(root: str | Path) -> list[PhysicalizedClip]:
             PhysicalizedClip(
                 robot=robot,
                 qvel=d["observation.qvel"],
-                object_vel=tuple(d[f"object.{o.name}.vel"] for o in robot.objects),
+                object_vel=tuple(d[f"{episode_column(m)}.vel"] for m in ep.meta.get("objects", [])),
                 action=d["action"],
                 torque=d["observation.torque"],
                 foot_force=d["observation.foot_force"],
