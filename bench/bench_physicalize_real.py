@@ -112,9 +112,8 @@ def main() -> None:
     print(f"{'clip':28s}{'object':12s}{'s':>6s}{'rt/core':>9s}  verdict: reason")
     for r in rows:
         rt = r.get("seconds", 0.0) / max(r.get("physicalize_cpu_s", 1e9), 1e-9)
-        print(
-            f"{r['clip']:28s}{r['object']:12s}{r.get('seconds', 0):6.1f}{rt:9.2f}  {r['verdict']}: {r['reason'][:110]}"
-        )
+        reason = r["reason"].removeprefix(f"{r['verdict']}: ")
+        print(f"{r['clip']:28s}{r['object']:12s}{r.get('seconds', 0):6.1f}{rt:9.2f}  {r['verdict']}: {reason[:110]}")
     for line in summary(rows):
         print(line)
     print(f"({len(rows)} clips in {time.perf_counter() - t0:.0f} s wall on {args.jobs} worker processes)")

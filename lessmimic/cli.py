@@ -100,7 +100,16 @@ def _cmd_physicalize(a: argparse.Namespace) -> int:
         if kept
         else f"nothing written (report: datasets/{a.name}/logs/physicalized/report.json)"
     )
-    print(f"physicalized {n} clip(s): valid_frac {s.get('valid_frac', 0):.3g}, {kept} episode(s) -> {where}")
+    rejected, failed = s.get("clips_rejected", {}), s.get("clips_failed", {})
+    print(
+        f"physicalized {n} clip(s): valid_frac {s.get('valid_frac', 0):.3g}, {kept} episode(s) -> {where}"
+        + (
+            f"; rejected {sum(rejected.values())} ({', '.join(f'{k}: {v}' for k, v in rejected.items())})"
+            if rejected
+            else ""
+        )
+        + (f"; failed {sum(failed.values())} ({', '.join(f'{k}: {v}' for k, v in failed.items())})" if failed else "")
+    )
     for k in ("mpjpe_m", "root_pos_err_max_m", "penetration_max_m", "foot_slide_frac_1cm_per_frame", "realtime_factor"):
         if k in s:
             print(f"  {k}: {s[k]:.4g}")

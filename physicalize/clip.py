@@ -15,7 +15,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from physicalize.problem import tracking_problem
+from physicalize.feasibility import grasp_feasibility, rejection
+from physicalize.problem import object_qpos, tracking_problem
 from physicalize.rollout import Rollout, initial_state, replay, simulate
 from physicalize.static_torque import static_torque_figures
 from physicalize.validate import failure_class, validate
@@ -27,8 +28,6 @@ from pipeline.robot import FREE_NQ, NQ_ROBOT
 
 TEACHERS = ("base", "base+residual:<checkpoint>")
 REPLAY_TOL_M = 1e-6
-# share of held frames whose planned hand forces leave the friction cones (the InterMimic table: 0.85)
-NO_RETRY_GRIP_OUT = 0.5
 
 
 @dataclass(frozen=True)
@@ -80,14 +79,16 @@ def first_contact_s(clip: RobotClip) -> float | None:
 
 def _reference_figures(scene, ref, clip: RobotClip) -> tuple[dict, str]:
     """What the tracked reference asks beyond the robot, the same for every rollout of it: the static
-    upper-body torque (:mod:`physicalize.static_torque`) and the share of held frames whose planned hand
-    forces leave the friction cones; with the cause an invalid rollout's reason names ("" when none); and
+    upper-body torque (:mod:`physicalize.static_torque`), the share of held frames whose planned hand
+    forces leave the friction cones, and whether pressing hands can give the force the held objects need
+    (:mod:`physicalize.feasibility`); with the cause an invalid rollout's reason names ("" when none); and
     when the reference first touches an object (``reference_first_contact_s``, for the failure class)."""
     fps = clip.fps
     loads = None if ref.grasp is None else (ref.grasp.offset, ref.grasp.force)
     # what the reference asks of the upper body
     figures = static_torque_figures(ref.qpos, loads, scene.profile.effort_limit, fps)
     figures["reference_first_contact_s"] = first_contact_s(clip)
+    figures.update(grasp_feasibility(scene.model, ref.grasp, object_qpos(scene, clip, ref.frames), fps))
     if ref.grasp is None:
         held = outside = np.zeros(0, bool)
     else:
@@ -122,6 +123,16 @@ def _figures(
     return figures
 
 
+def _rejected(figures: dict, rejected: str, fps: float) -> dict:
+    """The figures of a clip rejected before tracking (:func:`physicalize.feasibility.rejection`)."""
+    frac, start = figures["reference_hold_infeasible_frac"], figures["reference_hold_infeasible_from_s"]
+    why = (
+        f"rejected: {rejected}: pressing hands cannot give the force the held object needs on {frac:.0%} of the "
+        f"held frames, from t={start:.2f} s (it must be pulled or gripped)"
+    )
+    return {**figures, "valid": False, "rejected": rejected, "failure": None, "reason": why}
+
+
 def physicalize_clip(
     clip: RobotClip,
     *,
@@ -131,15 +142,15 @@ def physicalize_clip(
     teacher: str = "base",
     grasp: bool = True,
     gains: tuple[WBCConfig, ...] | None = None,
-) -> tuple[RobotClip | None, Rollout, dict, dict]:
+) -> tuple[RobotClip | None, Rollout | None, dict, dict]:
     """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
     ``reference`` (see :func:`physicalize.problem.tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`).
+    A reference that asks what the robot cannot do (:func:`physicalize.feasibility.rejection`) is not tracked:
+    ``(None, None, figures with "rejected": <class>, {})``.
 
     The base teacher tries the QP gain sets ``gains`` (default :data:`physicalize.wbc_config.TEACHER_GAINS`) in
     order from the same initial state and keeps the first rollout that is valid, else the first set's:
-    rejection sampling over controller gains, each rollout validated on its own. A reference whose hands
-    must push outside their friction cones on most held frames (> :data:`NO_RETRY_GRIP_OUT`) is not
-    retried: no gains make a pressing hand pull. ``figures`` name the set
+    rejection sampling over controller gains, each rollout validated on its own. ``figures`` name the set
     kept (``teacher_gains``, its index) and how many ran (``teacher_attempts``); timings count them all.
     A residual teacher runs the first set only (its policy was trained on it)."""
     spec = parse_teacher(teacher)
@@ -150,8 +161,8 @@ def physicalize_clip(
     qpos0, qvel0 = initial_state(scene, ref, objects)
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0  # planning + tracking (not the checks)
     ref_figures = _reference_figures(scene, ref, clip)
-    if ref_figures[0]["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT:
-        gains = gains[:1]  # no gains make a pressing hand pull
+    if (rejected := rejection(ref_figures[0])) is not None:
+        return None, None, _rejected(ref_figures[0], rejected, clip.fps), {}
     tried = []
     for config in gains:
         t0, cpu0 = time.perf_counter(), time.process_time()

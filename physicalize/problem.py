@@ -29,6 +29,15 @@ def scene_for(clip: RobotClip, profile: str) -> Scene:
 REFERENCES = ("raw", "planned", "feasible")
 
 
+def object_qpos(scene: Scene, clip: RobotClip, frames: int) -> np.ndarray:
+    """(frames, nq - 36): the scene's free objects' qpos along the clip's object tracks (fixed ones: the model's)."""
+    obj_q = np.repeat(scene.model.qpos0[None, NQ_ROBOT:], frames, 0)
+    for o in (o for o in clip.objects if o.name in scene.object_qpos_adr):
+        adr = scene.object_qpos_adr[o.name] - NQ_ROBOT
+        obj_q[:, adr : adr + FREE_NQ] = o.pose[:frames]
+    return obj_q
+
+
 def tracking_problem(
     clip: RobotClip, profile: str = "mjlab", reference: str = "feasible", grasp: bool = True
 ) -> tuple[Scene, Reference, dict[str, np.ndarray], np.ndarray | None]:
@@ -43,10 +52,7 @@ def tracking_problem(
     ref = build_reference(scene.model, clip.qpos, clip.fps)
     zmp = None
     m = scene.model
-    obj_q = np.repeat(m.qpos0[None, NQ_ROBOT:], ref.frames, 0)
-    for o in (o for o in clip.objects if o.name in scene.object_qpos_adr):  # free objects; fixed ones are in the model
-        adr = scene.object_qpos_adr[o.name] - NQ_ROBOT
-        obj_q[:, adr : adr + FREE_NQ] = o.pose[: ref.frames]
+    obj_q = object_qpos(scene, clip, ref.frames)
     ref.seat = seat_support(m, ref, clip.contact_links, clip.contacts, obj_q)  # the plan's support includes the seat
     if reference == "planned":
         ref.com_plan, _, zmp = plan_com(ref)

@@ -12,6 +12,7 @@ on the same retargeted dataset with the same options is up to date (:func:`run_f
 from __future__ import annotations
 
 import time
+from collections import Counter
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -150,6 +151,8 @@ def _report(
         "summary": {
             **summarise([c for c in per_clip if "frames" in c] or per_clip),
             "valid_frac": float(np.mean([c["valid"] for c in per_clip])) if per_clip else 0.0,
+            "clips_rejected": dict(Counter(c["rejected"] for c in per_clip if c.get("rejected"))),
+            "clips_failed": dict(Counter(c["failure"] for c in per_clip if c.get("failure"))),
             "realtime_factor": simulated / max(seconds, 1e-9),
             "episodes_written": kept,
         },

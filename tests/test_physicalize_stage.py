@@ -7,7 +7,7 @@ import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 
 from lessmimic.cli import main
-from physicalize.clip import NO_RETRY_GRIP_OUT, physicalize_clip
+from physicalize.clip import physicalize_clip
 from physicalize.reference import place_on_floor
 from physicalize.stage import _clip_key, physicalize_one
 from physicalize.wbc_config import TEACHER_GAINS, WBCConfig
@@ -111,16 +111,15 @@ def test_the_next_gain_set_is_tried_when_a_rollout_is_invalid():
 
 
 @needs_shared
-def test_a_reference_the_hands_cannot_follow_is_not_retried():
-    """The InterMimic table is dragged towards the body by hands that can only press: no gain set can follow it."""
+def test_a_reference_the_hands_cannot_follow_is_rejected_before_tracking():
+    """The InterMimic table is dragged towards the body by hands that can only press: rejected, not tracked."""
     from pipeline.readers import read_clips
     from retarget.clip import retarget_clip
 
     clip = retarget_clip(read_clips(SHARED_MOCAP / "intermimic" / "sub2_largetable_000.pt")[0])[0]
-    _, _, f, _ = physicalize_clip(clip)
-    assert (
-        f["reference_grasp_outside_friction_frac"] > NO_RETRY_GRIP_OUT and not f["valid"] and f["teacher_attempts"] == 1
-    )
+    robot, roll, f, _ = physicalize_clip(clip)
+    assert robot is None and roll is None and not f["valid"] and f["rejected"] == "needs a grip"
+    assert f["reference_hold_infeasible_frac"] > 0.5 and f["reason"].startswith("rejected: needs a grip")
 
 
 def test_bad_arguments_are_one_line_errors(retargeted, capsys):
