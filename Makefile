@@ -17,7 +17,7 @@ RUN_ARGS = -j $(JOBS) --executor $(EXECUTOR)
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install lint format retarget physicalize train-residual features test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-features clean-venv
+.PHONY: install lint format retarget import physicalize train-residual features test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-features clean-venv
 
 install: $(VENV)/.installed
 
@@ -32,6 +32,13 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 
 retarget: install
 	$(CLI) retarget $(STAGE_ARGS) $(RUN_ARGS)
+
+# Bring your own G1 motion (BeyondMimic .npz, GMR .pkl, HDMI folders) as the retargeted stage: make import physicalize features INPUT=...
+OBJECT_MESH ?=
+OBJECT_MASS ?=
+import: install
+	$(CLI) import --name $(NAME) $(if $(INPUT),--input $(INPUT)) $(if $(OVERWRITE),--overwrite) $(RUN_ARGS) \
+		$(if $(OBJECT_MESH),--object-mesh $(OBJECT_MESH)) $(if $(OBJECT_MASS),--object-mass $(OBJECT_MASS))
 
 TEACHER ?= base
 physicalize: install

@@ -78,6 +78,31 @@ def _cmd_retarget(a: argparse.Namespace) -> int:
     return 1 if report["failed"] and not report["clips"] else 0
 
 
+def _cmd_import(a: argparse.Namespace) -> int:
+    from retarget.imported import run_stage
+
+    if a.input is None:
+        raise InputError(None, "--input", "import needs G1 motion files or a folder of them")
+    report = run_stage(
+        a.input,
+        a.name,
+        overwrite=a.overwrite,
+        jobs=a.jobs,
+        executor=a.executor,
+        object_mesh=a.object_mesh,
+        object_mass=a.object_mass,
+    )
+    if report.get("up_to_date"):
+        print(up_to_date_line("import", a.name, "retargeted"))
+        return 0
+    held = sorted({j for c in report["clips"] for j in c["held_joints"]})
+    print(
+        f"imported {len(report['clips'])} G1 motion(s), {report['summary']['frames']} frames"
+        f" -> datasets/{a.name}/retargeted/" + (f" (held at the default pose: {', '.join(held)})" if held else "")
+    )
+    return 0
+
+
 def _cmd_physicalize(a: argparse.Namespace) -> int:
     from physicalize.stage import run_stage
 
@@ -226,6 +251,23 @@ def _add_retarget(sub) -> None:
     p.set_defaults(func=_cmd_retarget)
 
 
+def _add_import(sub) -> None:
+    p = sub.add_parser(
+        "import",
+        help="G1 motions retargeted by other tools (BeyondMimic/mjlab .npz, GMR .pkl, HDMI motion folders) -> "
+        "datasets/<NAME>/retargeted/, for physicalize and features",
+    )
+    p.add_argument("--input", default=None, help="a G1 motion file or HDMI motion folder, or a folder of them")
+    p.add_argument("--name", default="default", help="dataset name: writes datasets/<NAME>/retargeted/")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output dataset")
+    p.add_argument(
+        "--object-mesh", default=None, help="mesh of the object the motions carry (default: <object>.obj beside them)"
+    )
+    p.add_argument("--object-mass", type=float, default=None, help="the object's mass in kg (default 2)")
+    _run_args(p)
+    p.set_defaults(func=_cmd_import)
+
+
 def _add_physicalize(sub) -> None:
     p = sub.add_parser(
         "physicalize", help="retargeted clips -> simulated state-action data (datasets/<NAME>/physicalized/)"
@@ -326,7 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="lessmimic", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     sub = ap.add_subparsers(dest="command", required=True)
-    for add in (_add_retarget, _add_physicalize, _add_residual, _add_features, _add_tools):
+    for add in (_add_retarget, _add_import, _add_physicalize, _add_residual, _add_features, _add_tools):
         add(sub)
     return ap
 

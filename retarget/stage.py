@@ -77,7 +77,7 @@ CARD_NOTES = [
 ]
 
 
-def _feature_frames(features) -> dict[str, str]:
+def feature_frames(features) -> dict[str, str]:
     frames = {
         "observation.state": "world, z-up (root); joint space",
         "observation.qvel": "world (root linear), root body (angular)",
@@ -115,7 +115,7 @@ def _card(name: str, done: list[ClipResult], features) -> DatasetCard:
         synthetic=synthetic_,
         stage="retargeted",
         license="apache-2.0" if synthetic_ else "other",
-        feature_frames=_feature_frames(features),
+        feature_frames=feature_frames(features),
         notes=[*CARD_NOTES, objects_note([r.robot for r in done])],
     )
 

@@ -14,6 +14,9 @@ suffix     reader
 ``.pkl``   GMR robot motion, through :func:`read_robot_clip` only
 =========  ====================================================================================
 
+G1 motions (peers' retargeting: BeyondMimic/mjlab ``.npz``, GMR ``.pkl``, HDMI ``motion.npz`` + ``meta.json``
+folders) are read by :func:`read_robot_clip` / :func:`read_robot_clips` (:mod:`pipeline.readers.peers`).
+
 A folder yields every clip inside it and in its direct sub-folders, sorted by relative path.
 Files that are not human clips are skipped there: other suffixes (meshes, ``height_dict.pkl``),
 peers' robot ``.npz``, ``.npz`` files with none of the keys above, and ``.mcap`` files without a
@@ -25,6 +28,7 @@ transform stream (e.g. inspection logs). Any other problem in a clip is an error
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -172,3 +176,53 @@ def read_robot_clip(
             joint_names=joint_names,
         )
     raise InputError(path, "suffix", f"unknown robot motion format {path.suffix or '(none)'!r}; expected .npz or .pkl")
+
+
+def _robot_candidates(folder: Path) -> list[Path]:
+    """G1 motion files and HDMI motion folders at or below ``folder``, sorted by relative path."""
+    out = []
+    for p in sorted(folder.rglob("*"), key=lambda p: p.relative_to(folder).as_posix()):
+        if p.is_dir() and (p / "motion.npz").is_file() and (p / "meta.json").is_file():
+            out.append(p)
+        elif p.is_file() and p.parent not in out and p.suffix.lower() == ".pkl" and p.name != "height_dict.pkl":
+            out.append(p)
+        elif p.is_file() and p.suffix.lower() == ".npz" and p.name != "motion.npz" and npz_kind(p) == "robot":
+            out.append(p)
+    return out
+
+
+def read_robot_clips(path: str | Path, *, object_geometry: ObjectGeometry | None = None) -> list[RobotClip]:
+    """Every G1 motion in ``path``: a BeyondMimic/mjlab ``.npz``, a GMR ``.pkl``, an HDMI motion folder, or a folder
+    of them (searched recursively). An object a file carries must have a geometry (``object_geometry``, else
+    ``<name>.obj`` beside the file): a one-line :class:`InputError` otherwise, as for any unreadable file."""
+    from pipeline.readers.peers import object_mesh_beside, read_hdmi_motion
+
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, "input", "does not exist")
+    if path.is_dir() and (path / "motion.npz").is_file():
+        items = [path]
+    elif path.is_dir():
+        items = _robot_candidates(path)
+    else:
+        items = [path]
+    clips = []
+    for item in items:
+        if item.is_dir():
+            clips.append(read_hdmi_motion(item, object_geometry=object_geometry))
+            continue
+        with warnings.catch_warnings():  # an object left out for want of geometry is looked for beside the file
+            warnings.simplefilter("ignore", UserWarning)
+            clip = read_robot_clip(item, object_geometry=object_geometry)
+        left_out = clip.provenance.get("object_left_out")
+        if left_out is not None:
+            geometry = object_mesh_beside(item, left_out)
+            if geometry is None:
+                raise InputError(
+                    item, f"object {left_out}", "has no geometry: pass --object-mesh or put <name>.obj beside it"
+                )
+            clip = read_robot_clip(item, object_geometry=geometry, object_name=left_out)
+        clips.append(clip)
+    if not clips:
+        raise InputError(path, "input", "no G1 motions (.npz, .pkl, HDMI motion folders) in this folder")
+    return clips

@@ -18,6 +18,15 @@ BeyondMimic / mjlab motion ``.npz`` (OmniRetarget writes it too)
     height: the box still rests at the human clip's 0.184 m), not the mesh, so 1.0 is right for
     that file.
 
+HDMI motion folder (``motion.npz`` + ``meta.json``)
+    ``meta.json``: ``fps``, ``joint_names`` (possibly fewer than 29: HDMI's 25-joint G1 has no wrist pitch/yaw),
+    ``body_names`` (the robot's links, then any object body, e.g. ``largebox``); ``motion.npz``: ``joint_pos``
+    ``[T, J]``, ``body_pos_w`` ``[T, B, 3]``, ``body_quat_w`` ``[T, B, 4]`` ``wxyz``. The root is the ``pelvis``
+    body. Joints the file lacks that carry no weight (the wrists, :data:`HELD_JOINT_KEYS`) are held at the
+    actuator profile's default pose and named in ``provenance["held_joints"]``; a file without a leg, waist or
+    arm joint is an :class:`InputError`. A body that is not a G1 link is the object: its geometry is
+    ``object_geometry=``, else ``<name>.obj`` in the folder or its parent; none is an :class:`InputError`.
+
 GMR ``.pkl`` (a pickle of numpy arrays)
     ``fps``, ``root_pos`` ``[T, 3]``, ``root_rot`` ``[T, 4]`` scalar-last ``xyzw``, ``dof_pos``
     ``[T, 29]`` in the Unitree G1 29-DoF order (= mjlab's; GMR stores no names), optional
@@ -27,6 +36,7 @@ GMR ``.pkl`` (a pickle of numpy arrays)
 
 from __future__ import annotations
 
+import json
 import warnings
 from pathlib import Path
 
@@ -34,10 +44,12 @@ import numpy as np
 
 from pipeline.clip import ObjectTrack, RobotClip, check_array
 from pipeline.errors import InputError
-from pipeline.geometry import ObjectGeometry
+from pipeline.geometry import MeshGeometry, ObjectGeometry
 from pipeline.readers.keypoints import load_npz, load_numpy_pickle
-from pipeline.robot import G1_JOINT_NAMES
+from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES, actuator_profile, g1_model
 from pipeline.rotations import xyzw_to_wxyz
+
+HELD_JOINT_KEYS = ("wrist",)  # joints a motion file may lack: they carry no weight, held at the default pose
 
 
 def _array(d, key: str, width: int | None, src: str, frames: int | None = None) -> np.ndarray:
@@ -153,3 +165,74 @@ def read_gmr_pkl(path: str | Path) -> RobotClip:
         provenance["link_body_list"] = [str(n) for n in d["link_body_list"]]
     qpos = np.concatenate([root_pos, xyzw_to_wxyz(root_rot), dof], axis=1)
     return RobotClip(qpos, fps, src, method="peer:gmr_pkl", provenance=provenance)
+
+
+def _joints_with_held(names: list[str], jp: np.ndarray, src: str) -> tuple[np.ndarray, list[str]]:
+    """(T, 29) joints in mjlab order from a file whose ``J`` columns are ``names``; missing wrist joints held at
+    the mjlab profile's default (their names returned), any other missing joint an :class:`InputError`."""
+    missing = [n for n in G1_JOINT_NAMES if n not in names]
+    bad = [n for n in missing if not any(k in n for k in HELD_JOINT_KEYS)]
+    if bad:
+        raise InputError(src, "joint_names", f"missing G1 joints that carry weight: {', '.join(bad)}")
+    unknown = [n for n in names if n not in G1_JOINT_NAMES]
+    if unknown:
+        raise InputError(src, "joint_names", f"not G1 joints: {', '.join(unknown)}")
+    default = actuator_profile("mjlab").default_joint_pos
+    out = np.repeat(default[None], jp.shape[0], 0)
+    for j, n in enumerate(G1_JOINT_NAMES):
+        if n in names:
+            out[:, j] = jp[:, names.index(n)]
+    return out, missing
+
+
+def object_mesh_beside(path: Path, name: str) -> MeshGeometry | None:
+    """``<name>.obj`` in ``path``'s folder or the one above it, as a mesh geometry (None: none there)."""
+    for folder in (path.parent, path.parent.parent):
+        candidate = folder / f"{name}.obj"
+        if candidate.is_file():
+            return MeshGeometry(str(candidate))
+    return None
+
+
+def read_hdmi_motion(folder: str | Path, *, object_geometry: ObjectGeometry | None = None) -> RobotClip:
+    """An HDMI motion folder (``motion.npz`` + ``meta.json``) as a :class:`RobotClip` (see the module doc)."""
+    folder = Path(folder)
+    src = str(folder)
+    try:
+        meta = json.loads((folder / "meta.json").read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(folder / "meta.json", "file", f"not a readable JSON file ({exc})") from None
+    for key in ("fps", "joint_names", "body_names"):
+        if key not in meta:
+            raise InputError(folder / "meta.json", key, "missing")
+    d, _ = load_npz(folder / "motion.npz")
+    jp = _array(d, "joint_pos", len(meta["joint_names"]), src)
+    T = jp.shape[0]
+    joints, held = _joints_with_held([str(n) for n in meta["joint_names"]], jp, src)
+    bodies = [str(n) for n in meta["body_names"]]
+    if "pelvis" not in bodies:
+        raise InputError(folder / "meta.json", "body_names", "no pelvis body: the root is unknown")
+    pos, quat = np.asarray(d["body_pos_w"], np.float64), np.asarray(d["body_quat_w"], np.float64)
+    if pos.shape[:2] != (T, len(bodies)) or quat.shape[:2] != (T, len(bodies)):
+        raise InputError(src, "body_pos_w", f"shapes {pos.shape}, {quat.shape} do not match ({T}, {len(bodies)}, .)")
+    b = bodies.index("pelvis")
+    root = np.concatenate([pos[:, b], quat[:, b]], axis=1)
+    links = {g1_model().body(i).name for i in range(1, g1_model().nbody)} | set(G1_LINK_NAMES)
+    objects = []
+    for k in (k for k, n in enumerate(bodies) if n not in links):
+        name = bodies[k]
+        geometry = object_geometry or object_mesh_beside(folder / "motion.npz", name)
+        if geometry is None:
+            raise InputError(src, f"object {name}", "has no geometry: pass --object-mesh or put <name>.obj beside it")
+        objects.append(ObjectTrack(name, geometry, np.concatenate([pos[:, k], quat[:, k]], axis=1), source=src))
+    provenance = {"format": "hdmi_motion", "file": src, "joint_order": "reordered by name to mjlab G1 order"}
+    if held:
+        provenance["held_joints"] = held
+    return RobotClip(
+        np.concatenate([root, joints], axis=1),
+        float(meta["fps"]),
+        src,
+        objects=tuple(objects),
+        method="peer:hdmi_motion",
+        provenance=provenance,
+    )
