@@ -9,6 +9,11 @@ does, one table row each:
   first contact (approach or locomotion), fell at contact (the first second of it), fell while holding,
   object lost, joint limits, penetration, foot sliding, tracking error, or error (an exception).
 
+Each row also says how the hands hold the object where the human lifts it with both hands (object 3 cm above its
+first height, both human wrists touching it): ``opp`` is the mean of ``n_l . n_r`` (the object's outward surface
+normals nearest each wrist: -1 opposite sides) for the human's wrists and for the retargeted G1's, ``human/G1``
+(``-``: no such frames): a retargeting that turns a squeeze into a one-sided hold starts a grasp physics cannot keep.
+
 Then per object kind and over all: valid / rejected / failed counts, ``valid`` over the clips not rejected
 (the issue's bar: >= 0.8), ``rejected`` over all clips (<= 0.25), and the speed of the physicalize pass in
 simulated seconds per CPU-second (>= 2; retargeting is timed apart). Clips run in ``--jobs`` worker processes
@@ -30,9 +35,15 @@ import torch
 
 torch.set_num_threads(1)
 
+import numpy as np  # noqa: E402
+
 from physicalize.clip import physicalize_clip  # noqa: E402
+from pipeline.distance.field import ObjectField  # noqa: E402
+from pipeline.geometry import MeshGeometry  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
+from pipeline.robot import HAND_BODIES  # noqa: E402
 from pipeline.stage.executor import map_ordered  # noqa: E402
+from pipeline.terms.link_motion import link_motion  # noqa: E402
 from retarget.clip import retarget_clip  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
@@ -45,6 +56,30 @@ def object_kind(path: Path) -> str:
     return parts[1] if len(parts) >= 3 else path.stem
 
 
+def hand_opposition(human, robot) -> tuple[float | None, float | None]:
+    """Mean ``n_l . n_r`` of the human's and the G1's wrists where the human lifts the object with both hands."""
+    if human.contacts is None or not robot.objects:
+        return None, None
+    h = human.resampled(robot.fps)
+    wrists = [h.skeleton.index(n) for n in ("left_wrist", "right_wrist") if n in h.skeleton.joint_names]
+    if len(wrists) < 2:
+        return None, None
+    o_h, o_r = h.objects[0], robot.objects[0]
+    T = min(h.frames, robot.frames)
+    frames = np.flatnonzero(h.contacts[:T, wrists].all(axis=1) & (o_r.pose[:T, 2] > o_r.pose[0, 2] + 0.03))
+    if not frames.size:
+        return None, None
+    field = ObjectField.from_geometry(
+        o_r.geometry, **({"cache": False} if isinstance(o_r.geometry, MeshGeometry) else {})
+    )
+    links = link_motion(robot.qpos[frames], np.zeros((len(frames), 35)), HAND_BODIES, robot.source).pos
+    out = []
+    for pts, poses in ((h.joint_pos[frames][:, wrists], o_h.pose[frames]), (links, o_r.pose[frames])):
+        g = np.asarray(field.query_links(pts, poses).grad)
+        out.append(float(np.mean(np.einsum("ti,ti->t", g[:, 0], g[:, 1]))))
+    return out[0], out[1]
+
+
 def run_clip(path: Path) -> dict:
     """Retarget and physicalize one clip file; its figures, verdict and timings."""
     row = {"clip": path.name, "folder": path.parent.name, "object": object_kind(path)}
@@ -53,6 +88,7 @@ def run_clip(path: Path) -> dict:
         c0 = time.process_time()
         robot = retarget_clip(human)[0]
         row["retarget_cpu_s"] = time.process_time() - c0
+        row["opposition_human"], row["opposition_g1"] = hand_opposition(human, robot)
         c0 = time.process_time()
         _, roll, figures, _ = physicalize_clip(robot)
         row["physicalize_cpu_s"] = time.process_time() - c0
@@ -109,11 +145,13 @@ def main() -> None:
     files = clip_files(args.folders)
     t0 = time.perf_counter()
     rows = map_ordered(run_clip, files, jobs=args.jobs, desc="real clips")
-    print(f"{'clip':28s}{'object':12s}{'s':>6s}{'rt/core':>9s}  verdict: reason")
+    print(f"{'clip':28s}{'object':12s}{'s':>6s}{'rt/core':>9s}{'opp':>12s}  verdict: reason")
     for r in rows:
         rt = r.get("seconds", 0.0) / max(r.get("physicalize_cpu_s", 1e9), 1e-9)
         reason = r["reason"].removeprefix(f"{r['verdict']}: ")
-        print(f"{r['clip']:28s}{r['object']:12s}{r.get('seconds', 0):6.1f}{rt:9.2f}  {r['verdict']}: {reason[:110]}")
+        opp = "/".join("-" if v is None else f"{v:.2f}" for v in (r.get("opposition_human"), r.get("opposition_g1")))
+        head = f"{r['clip']:28s}{r['object']:12s}{r.get('seconds', 0):6.1f}{rt:9.2f}{opp:>12s}"
+        print(f"{head}  {r['verdict']}: {reason[:100]}")
     for line in summary(rows):
         print(line)
     print(f"({len(rows)} clips in {time.perf_counter() - t0:.0f} s wall on {args.jobs} worker processes)")
