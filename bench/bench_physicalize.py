@@ -97,7 +97,7 @@ def _clips():
 def _cell(key, f) -> str:
     v = f.get(key, float("nan"))
     if key == "frames_simulated":
-        return f"{v}/{f['frames']}"
+        return f"{v}/{f['frames']}" if "frames" in f else "rejected"
     if key in ("teacher_gains", "teacher_attempts"):
         return str(v)
     if isinstance(v, bool):
@@ -223,8 +223,9 @@ def main() -> None:
                         robot, reference=kind.split("/")[0], gains=TEACHER_GAINS[:1] if kind.endswith("/g0") else None
                     )
                 valid[kind].append(f["valid"])
-                sim = roll.frames / robot.fps
-                seconds[kind] = [seconds[kind][0] + sim, seconds[kind][1] + sim / f["realtime_factor_per_core"]]
+                sim = 0.0 if roll is None else roll.frames / robot.fps  # a rejected clip is not simulated
+                cpu = sim / f["realtime_factor_per_core"] if roll is not None else 0.0
+                seconds[kind] = [seconds[kind][0] + sim, seconds[kind][1] + cpu]
                 print(
                     f"{name:24s}{kind:14s}"
                     + "".join(f"{_cell(k, f):>10s}" for k, _ in COLUMNS)
