@@ -22,7 +22,7 @@ from pipeline.geometry import MeshGeometry, geometry_to_dict
 from pipeline.robot import G1_LINK_NAMES, LESSMIMIC_DEMO_DF_BODIES
 from pipeline.terms.interaction import DEMO_MAX_DISTANCE_M, demo_features, interaction_features, surface_point_velocity
 from pipeline.terms.link_motion import link_motion
-from pipeline.terms.observations import proprioception, root_command
+from pipeline.terms.observations import previous_actions, proprioception, root_command
 
 
 @dataclass(frozen=True)
@@ -115,5 +115,5 @@ def clip_features(clip: PhysicalizedClip, cfg: FeatureConfig, cache: FieldCache 
         ),
         object_index=near.object_index[:, k_df],
         root_command=root_command(robot.qpos, clip.qvel, robot.fps, cfg.root_horizon_s),
-        proprio=proprioception(robot.qpos, clip.qvel, clip.action),
+        proprio=proprioception(robot.qpos, clip.qvel, previous_actions(clip.action)),
     )

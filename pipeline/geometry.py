@@ -103,6 +103,19 @@ class Chair:
         if self.seat_height <= self.seat_thickness:
             raise ValueError(f"chair seat_height {self.seat_height} must exceed seat_thickness {self.seat_thickness}")
 
+    def scaled(self, factor) -> Chair:
+        """The chair scaled per axis in its frame (x depth, y width, z heights); legs scale with the smaller of x, y."""
+        sx, sy, sz = np.broadcast_to(np.asarray(factor, dtype=float), (3,))
+        return Chair(
+            seat_height=self.seat_height * sz,
+            seat_width=self.seat_width * sy,
+            seat_depth=self.seat_depth * sx,
+            seat_thickness=self.seat_thickness * sz,
+            back_height=self.back_height * sz,
+            back_thickness=self.back_thickness * sx,
+            leg_width=self.leg_width * min(sx, sy),
+        )
+
     def parts(self) -> list[tuple[str, Primitive, np.ndarray]]:
         """(name, box, centre in the chair frame) for each part."""
         hw, hd, t = self.seat_width / 2, self.seat_depth / 2, self.seat_thickness

@@ -1,14 +1,20 @@
-"""Ingest: read a user's mocap (or the embedded synthetic default) into validated clips and
+"""Ingest: read a user's mocap (or the embedded synthetic default, or a synthetic corpus) into validated clips and
 write them as one LeRobot dataset, ``datasets/<NAME>/human/`` (with its ``report.json``),
 and one inspection log per clip in ``datasets/<NAME>/logs/human/``.
 
 This is the part of the chain every stage shares; the retarget stage starts from it.
+
+A synthetic training corpus is named like an input path (:func:`synthetic_corpus`):
+``synthetic:<seeds>[:<tasks>]``, ``<seeds>`` a comma list of seeds ``S`` and inclusive ranges ``A-B``
+(``synthetic:0-24``, ``synthetic:3``, ``synthetic:0,5,7``), ``<tasks>`` a comma list of the generator's tasks
+(``synthetic:0-24:PickUp,Push``; default: all four).
 """
 
 from __future__ import annotations
 
+import re
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from tqdm import tqdm
@@ -18,7 +24,8 @@ from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.clips import human_clips_to_episodes
 from pipeline.dataset.objects import objects_note
 from pipeline.dataset.write import check_target, write_dataset
-from pipeline.default_input import default_clips
+from pipeline.default_input import TASKS, default_clips
+from pipeline.errors import InputError
 from pipeline.readers import read_clips
 from pipeline.stage.atomic import write_json_atomic
 from pipeline.stage.inspect_log import write_human_log
@@ -34,10 +41,74 @@ class IngestResult:
     report: dict
 
 
+SYNTHETIC_PREFIX = "synthetic:"
+
+
+def is_synthetic_spec(input_path: str | Path | None) -> bool:
+    """Whether ``input_path`` names a synthetic corpus (``synthetic:...``) rather than a file or folder."""
+    return isinstance(input_path, str) and input_path.startswith(SYNTHETIC_PREFIX)
+
+
+def _seed(spec: str, text: str) -> int:
+    if not re.fullmatch(r"[+-]?\d+", text):
+        raise InputError(spec, "seeds", f"{text!r} is not an integer seed or an A-B range of them")
+    if int(text) < 0:
+        raise InputError(spec, "seeds", f"seed {int(text)} is negative (seeds are integers >= 0)")
+    return int(text)
+
+
+def parse_synthetic_spec(spec: str) -> tuple[tuple[int, ...], tuple[str, ...]]:
+    """``synthetic:<seeds>[:<tasks>]`` (module docstring) -> (seeds in the order given, tasks in the generator's
+    order); a bad spec is one :class:`InputError` line naming the field (``seeds`` or ``tasks``)."""
+    parts = spec.removeprefix(SYNTHETIC_PREFIX).split(":")
+    if len(parts) > 2:
+        raise InputError(spec, "spec", "expected synthetic:<seeds> or synthetic:<seeds>:<tasks>")
+    seeds: list[int] = []
+    for item in (s.strip() for s in parts[0].split(",")):
+        if not item:
+            raise InputError(spec, "seeds", "empty (expected e.g. 0-24, 3 or 0,5,7)")
+        if m := re.fullmatch(r"\s*(-?\w+)\s*-\s*(-?\w+)\s*", item):  # A-B (a lone "-3" is a negative seed)
+            a, b = _seed(spec, m[1]), _seed(spec, m[2])
+            if b < a:
+                raise InputError(spec, "seeds", f"range {a}-{b} is empty (A-B needs A <= B)")
+            seeds += range(a, b + 1)
+        else:
+            seeds.append(_seed(spec, item))
+    if dup := sorted({s for s in seeds if seeds.count(s) > 1}):
+        raise InputError(spec, "seeds", f"seed {dup[0]} is listed twice (every clip's source must be unique)")
+    tasks = list(TASKS)
+    if len(parts) == 2:
+        tasks = [t.strip() for t in parts[1].split(",")]
+        for t in tasks:
+            if t not in TASKS:
+                raise InputError(spec, "tasks", f"unknown task {t!r} (known: {', '.join(TASKS)})")
+        if len(set(tasks)) < len(tasks):
+            raise InputError(spec, "tasks", "a task is listed twice")
+    return tuple(seeds), tuple(t for t in TASKS if t in tasks)
+
+
+def synthetic_corpus(spec: str, fps: float = 30.0) -> list[HumanClip]:
+    """The synthetic clips of ``spec`` (:func:`parse_synthetic_spec`): for every seed ``s``,
+    ``default_clips(fps, seed=s)`` filtered to the tasks, each clip (and its objects) with the unique source
+    ``synthetic:<task>:seed<s>``; all labelled synthetic, as the generator makes them."""
+    seeds, tasks = parse_synthetic_spec(spec)
+    clips = []
+    for s in seeds:
+        for c in default_clips(fps, seed=s):
+            if c.task in tasks:
+                source = f"synthetic:{c.task}:seed{s}"
+                objects = tuple(replace(o, source=source) for o in c.objects)
+                clips.append(replace(c, source=source, objects=objects))
+    return clips
+
+
 def load_input(input_path: str | None, *, body_model: str | None = None, fps: float | None = None) -> list[HumanClip]:
-    """Clips from ``input_path`` (file or folder), or the embedded synthetic default when None."""
+    """Clips from ``input_path`` (file or folder, or a ``synthetic:<seeds>[:<tasks>]`` corpus:
+    :func:`synthetic_corpus`), or the embedded synthetic default when None."""
     if input_path is None:
         return default_clips()
+    if is_synthetic_spec(input_path):
+        return synthetic_corpus(input_path, fps or 30.0)
     return read_clips(Path(input_path), body_model=body_model, fps=fps)
 
 

@@ -24,7 +24,7 @@ from pipeline.dataset.clips import robot_clips_to_episodes
 from pipeline.dataset.objects import objects_note
 from pipeline.dataset.write import write_dataset
 from pipeline.errors import InputError
-from pipeline.ingest import ingest
+from pipeline.ingest import ingest, is_synthetic_spec, parse_synthetic_spec
 from pipeline.stage.executor import check_executor
 from pipeline.stage.inspect_log import write_robot_log
 from pipeline.stage.paths import file_stem, stage_dir
@@ -91,11 +91,18 @@ def input_fingerprint(
     input_path: str | None, *, body_model: str | None = None, height_override: float | None = None
 ) -> str:
     """What a run's output depends on (:mod:`pipeline.stage.state`): every input file's path, size and
-    mtime (the embedded default: its generator's source code), the body model's, and the height
-    override; not ``jobs``, which changes only the speed."""
+    mtime (the embedded default: its generator's source code; a ``synthetic:`` corpus: that code and the
+    spec's seeds and tasks, so ``synthetic:0-2`` and ``synthetic:0,1,2`` are the same input), the body model's,
+    and the height override; not ``jobs``, which changes only the speed. A bad corpus spec is its one-line
+    :class:`InputError` here, before any work."""
+    generator = [Path(default_input.__file__), *sorted(Path(synthetic.__file__).parent.glob("*.py"))]
     if input_path is None:
-        generator = [Path(default_input.__file__), *sorted(Path(synthetic.__file__).parent.glob("*.py"))]
         source = "embedded default " + files_fingerprint(generator, by_content=True)
+    elif is_synthetic_spec(input_path):
+        seeds, tasks = parse_synthetic_spec(input_path)
+        source = "synthetic corpus " + fingerprint(
+            generator=files_fingerprint(generator, by_content=True), seeds=seeds, tasks=tasks
+        )
     else:
         source = files_fingerprint([input_path])
     body = files_fingerprint([body_model]) if body_model else None

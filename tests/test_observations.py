@@ -8,6 +8,7 @@ from pipeline.rotations import wxyz_from_rotation
 from pipeline.terms.observations import (
     PROPRIO_NAMES,
     ROOT_COMMAND_NAMES,
+    previous_actions,
     projected_gravity,
     proprioception,
     root_command,
@@ -39,7 +40,7 @@ def test_proprio_layout_and_last_action():
     q, v, _ = _walk(4)
     q[:, 7:], v[:, 6:], v[:, 3:6] = rng.normal(size=(4, 29)), rng.normal(size=(4, 29)), rng.normal(size=(4, 3))
     a = rng.normal(size=(4, 29))
-    p = proprioception(q, v, a)
+    p = proprioception(q, v, previous_actions(a))
     assert p.shape == (4, 93) == (4, len(PROPRIO_NAMES))
     np.testing.assert_array_equal(p[:, :29], q[:, 7:])
     np.testing.assert_array_equal(p[:, 29:58], v[:, 6:])

@@ -56,16 +56,20 @@ def link_motion(qpos: np.ndarray, qvel: np.ndarray, links: tuple[str, ...], sour
         )
     d = mujoco.MjData(m)
     T, K = len(qpos), len(ids)
-    root_com = m.body_rootid[ids]
-    pos, rot, cvel, offset = np.zeros((T, K, 3)), np.zeros((T, K, 3, 3)), np.zeros((T, K, 6)), np.zeros((T, K, 3))
+    pos, rot, vel = np.zeros((T, K, 3)), np.zeros((T, K, 3, 3)), np.zeros((T, K, 3))
     for t in range(T):
         d.qpos[:], d.qvel[:] = qpos[t], qvel[t]
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
         mujoco.mj_comVel(m, d)
-        pos[t] = d.xpos[ids]
-        rot[t] = d.xmat[ids].reshape(K, 3, 3)
-        cvel[t] = d.cvel[ids]
-        offset[t] = d.xpos[ids] - d.subtree_com[root_com]
-    vel = cvel[..., 3:] + np.cross(cvel[..., :3], offset)
+        pos[t], rot[t], vel[t] = link_state(m, d, ids)
     return LinkMotion(tuple(links), pos, rot, vel)
+
+
+def link_state(m: mujoco.MjModel, d: mujoco.MjData, ids: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(pos (K, 3), rot (K, 3, 3), vel (K, 3))`` of the bodies ``ids`` in ``d`` after ``mj_kinematics``,
+    ``mj_comPos`` and ``mj_comVel`` (any model whose robot is one kinematic tree: a scene with objects too).
+    ``vel`` is the body origin's linear velocity, ``v_c + w x (x - c)`` (the module docstring)."""
+    cvel = d.cvel[ids]
+    offset = d.xpos[ids] - d.subtree_com[m.body_rootid[ids]]
+    return d.xpos[ids].copy(), d.xmat[ids].reshape(len(ids), 3, 3).copy(), cvel[:, 3:] + np.cross(cvel[:, :3], offset)

@@ -51,12 +51,18 @@ def projected_gravity(qpos: np.ndarray) -> np.ndarray:
     return rotation_from_wxyz(qpos[:, 3:7]).inv().apply([0.0, 0.0, -1.0])
 
 
-def proprioception(qpos: np.ndarray, qvel: np.ndarray, action: np.ndarray) -> np.ndarray:
-    """(T, 93) ``[q, dq, gravity_root, omega_root, a_(t-1)]`` from ``qpos (T, 36)``, MuJoCo ``qvel (T, 35)``
-    (its root angular velocity is already in the root frame) and ``action (T, 29)``."""
-    last = np.concatenate([np.zeros((1, action.shape[1])), action[:-1]])
+def previous_actions(action: np.ndarray) -> np.ndarray:
+    """(T, 29) the action of the frame before each frame of a clip (zeros before the first)."""
+    return np.concatenate([np.zeros((1, action.shape[1])), action[:-1]])
+
+
+def proprioception(qpos: np.ndarray, qvel: np.ndarray, last_action: np.ndarray) -> np.ndarray:
+    """(N, 93) ``[q, dq, gravity_root, omega_root, a_(t-1)]`` from ``qpos (N, 36)``, MuJoCo ``qvel (N, 35)``
+    (its root angular velocity is already in the root frame) and the previous actions ``last_action (N, 29)``
+    (the rows are a clip's frames, with :func:`previous_actions`, or an environment batch)."""
     return np.concatenate(
-        [qpos[:, JOINTS_QPOS], qvel[:, JOINTS_QVEL], projected_gravity(qpos), qvel[:, ROOT_ANG_VEL], last], axis=1
+        [qpos[:, JOINTS_QPOS], qvel[:, JOINTS_QVEL], projected_gravity(qpos), qvel[:, ROOT_ANG_VEL], last_action],
+        axis=1,
     )
 
 
@@ -66,11 +72,21 @@ def heading(qpos: np.ndarray) -> Rotation:
     return Rotation.from_euler("z", np.arctan2(x[:, 1], x[:, 0])[:, None])
 
 
-def root_command(qpos: np.ndarray, qvel: np.ndarray, fps: float, horizon_s: float = 1.0) -> np.ndarray:
-    """(T, 12) ``[H_t^T (p_j - p_t), rot6d(H_t^T R_j), H_t^T v_j]`` with ``j = min(t + horizon fps, T - 1)``."""
-    T = len(qpos)
-    j = np.minimum(np.arange(T) + int(round(horizon_s * fps)), T - 1)
+def root_command_to(qpos: np.ndarray, target_qpos: np.ndarray, target_vel: np.ndarray) -> np.ndarray:
+    """(N, 12) ``[H^T (p* - p), rot6d(H^T R*), H^T v*]``: the target root (position ``p*``, orientation ``R*`` of
+    ``target_qpos (N, 7+)``, linear velocity ``v* (N, 3)``) seen from the heading frame ``H`` of ``qpos (N, 7+)``."""
     h_inv = heading(qpos).inv()
-    dpos = h_inv.apply(qpos[j, :3] - qpos[:, :3])
-    rot6d = rot6((h_inv * rotation_from_wxyz(qpos[j, 3:7])).as_matrix())
-    return np.concatenate([dpos, rot6d, h_inv.apply(qvel[j, :3])], axis=1)
+    dpos = h_inv.apply(target_qpos[:, :3] - qpos[:, :3])
+    rot6d = rot6((h_inv * rotation_from_wxyz(target_qpos[:, 3:7])).as_matrix())
+    return np.concatenate([dpos, rot6d, h_inv.apply(target_vel[:, :3])], axis=1)
+
+
+def command_frames(frames: int, fps: float, horizon_s: float = 1.0) -> np.ndarray:
+    """(T,) the frame ``j = min(t + horizon fps, T - 1)`` each frame's root command looks at."""
+    return np.minimum(np.arange(frames) + int(round(horizon_s * fps)), frames - 1)
+
+
+def root_command(qpos: np.ndarray, qvel: np.ndarray, fps: float, horizon_s: float = 1.0) -> np.ndarray:
+    """(T, 12) a clip's own root commands: :func:`root_command_to` frame ``j`` of :func:`command_frames`."""
+    j = command_frames(len(qpos), fps, horizon_s)
+    return root_command_to(qpos, qpos[j], qvel[j, :3])

@@ -1,0 +1,120 @@
+"""The interaction environment, the teacher service and the evaluation harness on the default corpus (real
+retarget -> physicalize -> features datasets, real MuJoCo)."""
+
+import numpy as np
+import pytest
+
+from features.stage import run_stage as features_stage
+from physicalize.stage import run_stage as physicalize_stage
+from pipeline.dataset.read import episode_ranges, read_columns
+from pipeline.errors import InputError
+from pipeline.stage.paths import stage_dir
+from retarget.stage import run_stage as retarget_stage
+from train.actors import TeacherActor
+from train.env import InteractionEnv
+from train.episodes import load_episodes, scaled_objects
+from train.evaluate import EvalConfig, evaluate, markdown
+from train.teacher import Teacher
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory):
+    """The default chain (4 synthetic clips) in a temporary datasets root; its episodes."""
+    root = tmp_path_factory.mktemp("datasets")
+    mp = pytest.MonkeyPatch()
+    mp.setenv("LESSMIMIC_DATASETS", str(root))
+    retarget_stage(None, "train")
+    physicalize_stage("train")
+    features_stage("train")
+    yield load_episodes("train")
+    mp.undo()
+
+
+def test_replayed_states_give_the_features_dataset_columns(corpus):
+    """The environment's observation of each recorded state is the features dataset's row, to the last bit."""
+    cols = read_columns(
+        stage_dir("train", "features"), ["observation.proprio", "observation.root_command", "observation.df"]
+    )
+    starts, _, _ = episode_ranges(stage_dir("train", "features"))
+    env = InteractionEnv()
+    for e, episode in enumerate(corpus):
+        env.reset([(episode, 1.0)])
+        slot, sim = env.slots[0], episode.simulated
+        for t in range(0, sim.frames, 7):
+            slot.t, slot.last_action = t, (sim.action[t - 1] if t else np.zeros(29))
+            slot.set_state(sim.robot.qpos[t], sim.qvel[t], np.concatenate([o.pose[t] for o in sim.robot.objects]))
+            obs = env.observe()
+            for key, column in (
+                ("proprio", "observation.proprio"),
+                ("root_command", "observation.root_command"),
+                ("df", "observation.df"),
+            ):
+                np.testing.assert_allclose(getattr(obs, key)[0], cols[column][starts[e] + t], rtol=0, atol=1e-6)
+                assert np.array_equal(getattr(obs, key)[0].astype(np.float32), cols[column][starts[e] + t])
+
+
+def test_stepping_is_deterministic_and_threads_change_nothing(corpus):
+    rng = np.random.default_rng(0)
+    actions = [corpus[0].simulated.action[t] + rng.normal(0, 0.05, 29) for t in range(30)]
+    finals = []
+    for threads in (1, 2):
+        from train.env import EnvConfig
+
+        env = InteractionEnv(EnvConfig(threads=threads))
+        env.reset([(corpus[0], 1.0), (corpus[2], 1.0)])
+        for a in actions:
+            obs, _ = env.step(np.stack([a, a]))
+        finals.append((obs.proprio.copy(), obs.df.copy(), [s.data.qpos.copy() for s in env.slots]))
+        env.close()
+    assert np.array_equal(finals[0][0], finals[1][0]) and np.array_equal(finals[0][1], finals[1][1])
+    assert all(np.array_equal(a, b) for a, b in zip(finals[0][2], finals[1][2]))
+
+
+def test_the_teacher_answers_at_an_off_reference_state(corpus):
+    """Shoved 10 cm sideways and 0.3 m/s, the teacher still returns finite targets within the joint ranges' reach,
+    and tracking from the recorded first state completes the PickUp."""
+    pickup = next(e for e in corpus if e.task == "PickUp")
+    env = InteractionEnv()
+    env.reset([(pickup, 1.0)])
+    slot = env.slots[0]
+    teacher = Teacher(pickup, slot.scene.model)
+    q, v = slot.data.qpos.copy(), slot.data.qvel.copy()
+    q[1] += 0.10
+    v[1] += 0.3
+    action = teacher.act_state(q, v, 40)
+    assert action.shape == (29,) and np.isfinite(action).all()
+    assert not np.allclose(action, teacher.act_state(slot.data.qpos.copy(), slot.data.qvel.copy(), 40))
+    while not slot.done:
+        env.step(teacher.act(slot.data, slot.t)[None])
+    assert slot.meter.success and not slot.fell
+
+
+def test_scaled_objects_rest_on_the_floor_and_the_command_does_not_change(corpus):
+    box = next(e for e in corpus if e.task == "PickUp").simulated.robot.objects
+    small, large = scaled_objects(box, 0.4), scaled_objects(box, 1.6)
+    half = box[0].geometry.half_extents[2]
+    assert np.isclose(small[0].pose[0, 2], 0.4 * half) and np.isclose(large[0].pose[0, 2], 1.6 * half)
+    env = InteractionEnv()
+    env.reset([(corpus[0], 0.4), (corpus[0], 1.6)])
+    obs = env.observe()
+    assert np.array_equal(obs.root_command[0], obs.root_command[1]) and not np.allclose(obs.df[0], obs.df[1])
+    with pytest.raises(InputError, match="scale: .* outside the evaluated range 0.4-1.6"):
+        env.reset_one(0, corpus[0], 2.0)
+
+
+def test_the_evaluation_harness_scores_the_teacher(corpus):
+    result = evaluate(TeacherActor(), corpus, EvalConfig(seeds=(0,), episodes=1, tasks=("PickUp", "Push")), "teacher")
+    cells = result["cells"]
+    assert set(cells) == {
+        "PickUp@0.4",
+        "PickUp@0.6",
+        "PickUp@1",
+        "PickUp@1.4",
+        "PickUp@1.6",
+        "Push@0.6",
+        "Push@1",
+        "Push@1.4",
+    }
+    assert cells["PickUp@1"]["mean"] == 1.0 and cells["Push@1"]["mean"] > 0.9
+    row = markdown([result]).splitlines()[2].split(" | ")
+    assert row[0] == "| teacher" and row[3] == "100.0 +- 0.0" and row[6:9] == ["-", "-", "-"]  # PickUp 1.0; no SitStand

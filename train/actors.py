@@ -1,0 +1,81 @@
+"""Who acts in the environment: the student policy (:class:`PolicyActor`, with its ``l``-step observation history)
+or the QP teacher (:class:`TeacherActor`, the reference-based baseline). Both answer ``act(env) -> (N, 29)`` for
+the environments still running, after ``reset(env)`` at the start of their episodes."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from train.env import InteractionEnv, Obs
+from train.teacher import Teacher, episode_reference
+
+
+class History:
+    """The last ``l`` observations per environment, ``(N, l, dim)`` per term; an environment's first observation
+    fills its whole window (as :class:`pipeline.dataset.windows.WindowDataset` pads an episode's start)."""
+
+    def __init__(self, length: int):
+        self.length = length
+        self.terms: dict[str, np.ndarray] = {}
+
+    def reset(self, obs: Obs, which: np.ndarray | None = None) -> None:
+        for key, value in vars(obs).items():
+            if key not in self.terms or which is None:
+                self.terms[key] = np.repeat(value[:, None], self.length, axis=1)
+            else:
+                self.terms[key][which] = np.repeat(value[which, None], self.length, axis=1)
+
+    def push(self, obs: Obs) -> None:
+        for key, value in vars(obs).items():
+            self.terms[key] = np.concatenate([self.terms[key][:, 1:], value[:, None]], axis=1)
+
+
+class PolicyActor:
+    """A trained :class:`train.policy.InteractionPolicy` acting on its observation history."""
+
+    def __init__(self, policy, device: str = "cpu"):
+        self.policy, self.device = policy.eval(), device
+        self.history = History(policy.config.history)
+
+    def reset(self, env: InteractionEnv) -> None:
+        self.history.reset(env.observe())
+
+    def observe(self, obs: Obs) -> None:
+        self.history.push(obs)
+
+    @torch.no_grad()
+    def act(self, env: InteractionEnv) -> np.ndarray:
+        h = self.history.terms
+        tensors = [
+            torch.as_tensor(h[k], dtype=torch.float32, device=self.device) for k in ("proprio", "root_command", "df")
+        ]
+        return self.policy.act(*tensors).cpu().numpy().astype(np.float64)
+
+
+class TeacherActor:
+    """The QP teacher of each environment's episode (its 1.0x feasible reference), bound to that environment's
+    (possibly scaled) model. References are built once per episode and reused."""
+
+    def __init__(self, profile: str = "mjlab"):
+        self.profile = profile
+        self.teachers: list[Teacher] = []
+        self._refs: dict[int, object] = {}
+
+    def reset(self, env: InteractionEnv) -> None:
+        self.teachers = []
+        for s in env.slots:
+            key = id(s.episode)
+            if key not in self._refs:
+                self._refs[key] = episode_reference(s.episode, self.profile)
+            self.teachers.append(Teacher(s.episode, s.scene.model, self.profile, ref=self._refs[key]))
+
+    def observe(self, obs: Obs) -> None:
+        pass
+
+    def act(self, env: InteractionEnv) -> np.ndarray:
+        out = np.zeros((env.num_envs, 29))
+        for i, (s, teacher) in enumerate(zip(env.slots, self.teachers)):
+            if not s.done:
+                out[i] = teacher.act(s.data, s.t)
+        return out

@@ -1,0 +1,144 @@
+"""DAgger (paper Eq. 3; Ross et al. 2011) after behaviour cloning: the student rolls out in the interaction
+environment, the QP teacher labels every state it visits, the labelled windows join the data, the student is
+refitted. Read top to bottom:
+
+1. iteration ``i`` runs :attr:`DAggerConfig.episodes` training episodes at scale 1.0 in ``envs`` environments; at
+   every step each environment executes the teacher's targets with probability ``beta_i = beta0 * decay^i`` and
+   the student's otherwise (the beta-mixture of DAgger's policy ``pi_i = beta_i pi* + (1 - beta_i) pi_hat_i``),
+   and records the student's observation window with the teacher's targets for that state as its label;
+2. the aggregated windows (all iterations so far) and the dataset's windows train the student for ``fit_steps``
+   (:func:`train.bc.fit`);
+3. a row of ``dagger_log.jsonl`` per iteration: beta, the on-policy student-teacher action error (RMS over
+   joints, on the states the student visited), mean episode length, falls and task success of the rollouts,
+   windows aggregated, and the refit's losses.
+
+Each iteration's policy (``policy_dagger<i>.pt``) and aggregated windows (``dagger_data.pt``) are kept in the run
+folder: a rerun resumes after the last finished iteration. Deterministic for a seed on the CPU.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from pipeline.stage.atomic import write_bytes_atomic
+from train.actors import PolicyActor, TeacherActor
+from train.bc import BCConfig, WindowTensors, fit
+from train.env import EnvConfig, InteractionEnv
+from train.episodes import Episode
+from train.policy import InteractionPolicy, load_policy, save_policy
+
+
+@dataclass(frozen=True)
+class DAggerConfig:
+    iterations: int = 3
+    episodes: int = 16  # rolled out per iteration
+    envs: int = 8
+    beta0: float = 0.5
+    beta_decay: float = 0.5
+    fit_steps: int = 2000
+    seed: int = 0
+
+
+def collect(
+    policy: InteractionPolicy, teacher: TeacherActor, episodes: list[Episode], beta: float, rng, envs: int
+) -> tuple[WindowTensors, dict]:
+    """Roll the student out on ``episodes`` (``envs`` at a time) under the beta-mixture; its windows labelled by
+    the teacher, and the iteration's figures."""
+    windows = {k: [] for k in ("proprio", "root_command", "df", "action")}
+    sq_err, count, lengths, falls, success = 0.0, 0, [], 0, []
+    for k in range(0, len(episodes), envs):
+        env = InteractionEnv(EnvConfig())
+        env.reset([(e, 1.0) for e in episodes[k : k + envs]])
+        student = PolicyActor(policy)
+        student.reset(env)
+        teacher.reset(env)
+        done = np.zeros(env.num_envs, bool)
+        while not done.all():
+            live = ~done
+            a_student, a_teacher = student.act(env), teacher.act(env)
+            for key, v in student.history.terms.items():
+                windows[key].append(v[live])
+            windows["action"].append(a_teacher[live])
+            sq_err += float(((a_student - a_teacher)[live] ** 2).sum())
+            count += int(live.sum()) * a_student.shape[1]
+            use_teacher = (rng.random(env.num_envs) < beta)[:, None]
+            obs, done = env.step(np.where(use_teacher, a_teacher, a_student))
+            student.observe(obs)
+        lengths += [s.t for s in env.slots]
+        falls += sum(s.fell for s in env.slots)
+        success += [m.success for m in env.meters()]
+    tensors = {k: torch.as_tensor(np.concatenate(v), dtype=torch.float32) for k, v in windows.items()}
+    data = WindowTensors.from_windows(tensors["proprio"], tensors["root_command"], tensors["df"], tensors["action"])
+    figures = {
+        "action_rmse": float(np.sqrt(sq_err / max(count, 1))),
+        "episode_length": float(np.mean(lengths)),
+        "falls": int(falls),
+        "success": float(np.mean(success)),
+        "windows": len(data),
+    }
+    return data, figures
+
+
+def _device(policy: InteractionPolicy) -> torch.device:
+    return next(policy.backbone.parameters()).device
+
+
+def _save(data: WindowTensors, path: Path) -> None:
+    buf = io.BytesIO()
+    torch.save({k: getattr(data, k) for k in ("proprio", "root_command", "df", "rows", "action")}, buf)
+    write_bytes_atomic(path, buf.getvalue())
+
+
+def dagger(
+    policy: InteractionPolicy,
+    dataset: WindowTensors,
+    episodes: list[Episode],
+    run_dir: Path,
+    config: DAggerConfig = DAggerConfig(),
+    bc: BCConfig = BCConfig(),
+    heldout: WindowTensors | None = None,
+) -> InteractionPolicy:
+    """Run (or resume) the DAgger iterations (module docstring); returns the last iteration's policy, also saved as
+    ``run_dir/policy.pt``."""
+    run_dir = Path(run_dir)
+    log_path, data_path = run_dir / "dagger_log.jsonl", run_dir / "dagger_data.pt"
+    done_rows = [json.loads(line) for line in log_path.open()] if log_path.is_file() else []
+    aggregated = None
+    if done_rows and data_path.is_file():  # resume after the last finished iteration
+        aggregated = WindowTensors(**torch.load(data_path, weights_only=True))
+        policy = load_policy(run_dir / f"policy_dagger{len(done_rows) - 1}.pt", device=_device(policy))
+    teacher = TeacherActor(policy.layout.actuator_profile)
+    for it in tqdm(range(len(done_rows), config.iterations), desc="dagger", unit="iteration"):
+        rng = np.random.default_rng([config.seed, it])
+        order = rng.permutation(len(episodes))
+        chosen = [episodes[i] for i in np.resize(order, config.episodes)]
+        beta = config.beta0 * config.beta_decay**it
+        new, figures = collect(policy, teacher, chosen, beta, rng, config.envs)
+        aggregated = new if aggregated is None else WindowTensors.concat([aggregated, new])
+        torch.manual_seed(config.seed + it)
+        history = fit(
+            policy,
+            WindowTensors.concat([dataset, aggregated]),
+            replace(bc, steps=config.fit_steps, seed=bc.seed + it),
+            heldout,
+        )
+        row = {
+            "iteration": it,
+            "beta": beta,
+            **figures,
+            "aggregated_windows": len(aggregated),
+            "fit": history[-1] if history else {},
+        }
+        save_policy(policy, run_dir / f"policy_dagger{it}.pt")
+        _save(aggregated, data_path)
+        with log_path.open("a", encoding="utf-8") as f:  # last: the row marks a finished iteration
+            f.write(json.dumps(row) + "\n")
+    save_policy(policy, run_dir / "policy.pt", dagger_config=asdict(config))
+    return policy

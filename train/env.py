@@ -1,0 +1,248 @@
+"""The interaction environment: ``N`` G1 + object scenes in native MuJoCo on the CPU, 200 Hz physics under
+50 Hz control, each running an :class:`~train.episodes.Episode` at an object scale.
+
+**Actions** are the 29 joint position targets of the actuator profile's position actuators (the physicalized
+datasets' ``action``), held for :data:`SUBSTEPS` physics steps. **Observations** are the paper's
+``o_base`` terms, computed online by the same functions the features stage uses (:mod:`pipeline.terms`,
+:mod:`pipeline.distance`), so a dataset row and an environment step agree to the last bit on the same state:
+
+* ``proprio`` (N, 93): :func:`pipeline.terms.observations.proprioception` of the state and the previous action;
+* ``root_command`` (N, 12): :func:`pipeline.terms.observations.root_command_to` the episode's command -- its
+  simulated root :attr:`EnvConfig.root_horizon_s` ahead (where to go, never how big the object is);
+* ``df`` (N, K x 10): u_t per link (:func:`pipeline.terms.interaction.interaction_features`) from the link
+  states (:func:`pipeline.terms.link_motion.link_state`) and the objects' exact fields at the scaled geometry.
+
+The policy keeps its own ``l``-step history. Episodes end at the reference's last frame or on a fall
+(:func:`physicalize.rollout.fallen` against the episode's simulated motion); :class:`train.tasks.TaskMeter`
+scores them. Environments step in ``threads`` worker threads (MuJoCo releases the GIL while it steps).
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from features.compute import FeatureConfig
+from physicalize.contacts import robot_contacts
+from physicalize.hand_reach import hand_geoms
+from physicalize.rollout import SUBSTEPS, fallen
+from pipeline.distance.field import ObjectField, ObjectFields
+from pipeline.geometry import MeshGeometry
+from pipeline.robot import FOOT_BODIES, NQ_ROBOT, NUM_JOINTS, NV_ROBOT
+from pipeline.scene import Scene, SceneObject, build_scene, link_collision_geoms
+from pipeline.terms.interaction import interaction_features
+from pipeline.terms.link_motion import body_ids, link_motion, link_state
+from pipeline.terms.observations import command_frames, proprioception, root_command_to
+from train.episodes import Episode, check_scale, scaled_objects
+from train.tasks import Rules, StepFacts, TaskMeter
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """``links``: the DF links (the features stage's); ``root_horizon_s``: how far ahead the root command looks;
+    ``profile``: the actuator profile; ``threads``: worker threads stepping the environments."""
+
+    links: tuple[str, ...] = FeatureConfig().links
+    root_horizon_s: float = FeatureConfig().root_horizon_s
+    profile: str = "mjlab"
+    threads: int = 1
+    rules: Rules = field(default_factory=Rules)
+
+
+@dataclass
+class Obs:
+    proprio: np.ndarray  # (N, 93)
+    root_command: np.ndarray  # (N, 12)
+    df: np.ndarray  # (N, K * 10)
+
+
+class _Slot:
+    """One environment: its scene, state, episode and meters."""
+
+    def __init__(self, episode: Episode, scale, cfg: EnvConfig, fields: dict):
+        self.episode, self.scale = episode, check_scale(scale)
+        sim = episode.simulated
+        self.objects = scaled_objects(sim.robot.objects, self.scale)
+        self.scene: Scene = build_scene(
+            [SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in self.objects], cfg.profile
+        )
+        m = self.scene.model
+        self.data = mujoco.MjData(m)
+        self.ids = body_ids(m, cfg.links)
+        key = tuple((repr(o.geometry), o.name) for o in self.objects)
+        if key not in fields:  # one ObjectFields per object set: environments with the same objects share it
+            fields[key] = ObjectFields(tuple(_field(fields, o) for o in self.objects))
+        self.fields = fields[key]
+        self.command = command_frames(sim.frames, sim.robot.fps, cfg.root_horizon_s)
+        torso = link_motion(sim.robot.qpos, sim.qvel, ("torso_link",)).rot[:, 0]
+        self.ref_torso_quat = np.array([_mat_quat(R) for R in torso])
+        self.torso = m.body("torso_link").id
+        self.object_geoms = {g for g in range(m.ngeom) if m.geom_bodyid[g] in set(self.scene.object_body_id.values())}
+        self.robot_geoms = {g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == m.body("pelvis").id}
+        self.hand_geoms = set().union(*map(set, hand_geoms(m)))
+        self.pelvis_geoms = set(link_collision_geoms(m, "pelvis"))
+        feet = {g for b in FOOT_BODIES for g in link_collision_geoms(m, b)}
+        self.body_geoms = self.robot_geoms - self.hand_geoms - feet
+        links = sim.robot.contact_links
+        wrists = [links.index(b) for b in ("left_wrist_yaw_link", "right_wrist_yaw_link") if b in links]
+        self.pushing = (
+            sim.robot.contacts[:, wrists].any(axis=1)
+            if wrists and sim.robot.contacts is not None
+            else np.zeros(sim.frames, bool)
+        )
+        self.meter = TaskMeter(episode.task, sim.robot.fps, cfg.rules)
+        self.t, self.done, self.fell = 0, False, False
+        self.last_action = np.zeros(NUM_JOINTS)
+        self.set_state(sim.robot.qpos[0], sim.qvel[0])
+
+    def set_state(self, qpos: np.ndarray, qvel: np.ndarray, objects: np.ndarray | None = None) -> None:
+        """The robot at ``(qpos, qvel)``; the objects at ``objects`` (nq - 36), else their track at ``t``, at rest."""
+        d, m = self.data, self.scene.model
+        d.qpos[:NQ_ROBOT], d.qvel[:NV_ROBOT] = qpos, qvel
+        if objects is not None:
+            d.qpos[NQ_ROBOT:] = objects
+        else:
+            for o in self.objects:
+                if o.name in self.scene.object_qpos_adr:
+                    adr = self.scene.object_qpos_adr[o.name]
+                    d.qpos[adr : adr + 7] = o.pose[min(self.t, o.frames - 1)]
+            d.qvel[NV_ROBOT:] = 0.0
+        mujoco.mj_forward(m, d)
+
+    def step(self, action: np.ndarray) -> None:
+        """Hold ``action`` for :data:`SUBSTEPS` physics steps, then update the kinematics the observation reads."""
+        m, d = self.scene.model, self.data
+        d.ctrl[:] = action
+        for _ in range(SUBSTEPS):
+            mujoco.mj_step(m, d)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_comVel(m, d)
+        self.last_action = np.asarray(action, dtype=float).copy()
+        self.t += 1
+        sim = self.episode.simulated
+        k = min(self.t, sim.frames - 1)
+        self.fell = fallen(d, sim.robot.qpos[k, 2], self.torso, self.ref_torso_quat[k])
+        self.meter.update(self.facts(k))
+        self.done = self.fell or self.t >= sim.frames - 1
+
+    def facts(self, k: int) -> StepFacts:
+        m, d = self.scene.model, self.data
+        pelvis = hand = body = False
+        for c in robot_contacts(m, d, self.robot_geoms):
+            if c.other in self.object_geoms:
+                pelvis |= c.geom in self.pelvis_geoms
+                hand |= c.geom in self.hand_geoms
+                body |= c.geom in self.body_geoms
+        o = self.objects[0]
+        adr = self.scene.object_qpos_adr.get(o.name)
+        pos = d.qpos[adr : adr + 3].copy() if adr is not None else o.pose[0, :3]
+        return StepFacts(
+            object_low=_lowest_point(m, d, self.object_geoms),
+            object_pos=pos,
+            object_ref=o.pose[k, :3],
+            root_z=float(d.qpos[2]),
+            pelvis_on_object=pelvis,
+            hand_on_object=hand,
+            body_on_object=body,
+            reference_pushing=bool(self.pushing[k]),
+        )
+
+
+def _field(cache: dict, o) -> ObjectField:
+    """The object's exact field (meshes: warp's closest point, as the features stage queries them), built once."""
+    key = (repr(o.geometry), o.name)
+    if key not in cache:
+        cache[key] = ObjectField.from_geometry(
+            o.geometry, o.name, **({"cache": False} if isinstance(o.geometry, MeshGeometry) else {})
+        )
+    return cache[key]
+
+
+def _mat_quat(R: np.ndarray) -> np.ndarray:
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, R.ravel())
+    return q
+
+
+def _lowest_point(m: mujoco.MjModel, d: mujoco.MjData, geoms: set[int]) -> float:
+    """The lowest point of ``geoms`` (their local bounding boxes, exact for boxes) above the floor [m]."""
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+    low = np.inf
+    for g in geoms:
+        centre, half = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
+        corners = (centre + signs * half) @ d.geom_xmat[g].reshape(3, 3).T + d.geom_xpos[g]
+        low = min(low, float(corners[:, 2].min()))
+    return low
+
+
+class InteractionEnv:
+    """``N`` environments (module docstring); :meth:`reset` assigns each an episode and a scale."""
+
+    def __init__(self, config: EnvConfig = EnvConfig()):
+        self.cfg = config
+        self.slots: list[_Slot] = []
+        self._fields: dict = {}
+        self._pool = ThreadPoolExecutor(config.threads) if config.threads > 1 else None
+
+    @property
+    def num_envs(self) -> int:
+        return len(self.slots)
+
+    def reset(self, assignments: list[tuple[Episode, object]]) -> Obs:
+        """Start every environment: ``assignments[i] = (episode, scale)``; the observation of the first frame."""
+        self.slots = [_Slot(e, s, self.cfg, self._fields) for e, s in assignments]
+        return self.observe()
+
+    def reset_one(self, i: int, episode: Episode, scale) -> None:
+        self.slots[i] = _Slot(episode, scale, self.cfg, self._fields)
+
+    def step(self, actions: np.ndarray) -> tuple[Obs, np.ndarray]:
+        """Apply ``actions`` (N, 29) to the running environments (finished ones stand still); ``(obs, done)``."""
+        live = [(s, a) for s, a in zip(self.slots, actions) if not s.done]
+        if self._pool is not None:
+            list(self._pool.map(lambda sa: sa[0].step(sa[1]), live))
+        else:
+            for s, a in live:
+                s.step(a)
+        return self.observe(), np.array([s.done for s in self.slots])
+
+    def observe(self) -> Obs:
+        """The current observation of every environment (module docstring). The field queries of environments
+        with the same objects go in one batch (a query's fixed cost, ~0.1 ms, would otherwise repeat per env)."""
+        n = len(self.slots)
+        qpos = np.stack([s.data.qpos[:NQ_ROBOT] for s in self.slots])
+        qvel = np.stack([s.data.qvel[:NV_ROBOT] for s in self.slots])
+        last = np.stack([s.last_action for s in self.slots])
+        target_q, target_v = np.zeros((n, 7)), np.zeros((n, 3))
+        pos, vel = np.zeros((n, len(self.cfg.links), 3)), np.zeros((n, len(self.cfg.links), 3))
+        groups: dict[int, list[int]] = {}
+        for i, s in enumerate(self.slots):
+            sim = s.episode.simulated
+            j = s.command[min(s.t, sim.frames - 1)]
+            target_q[i], target_v[i] = sim.robot.qpos[j, :7], sim.qvel[j, :3]
+            pos[i], _, vel[i] = link_state(s.scene.model, s.data, s.ids)
+            groups.setdefault(id(s.fields), []).append(i)
+        phi, grad = np.zeros(pos.shape[:2]), np.zeros(pos.shape)
+        for rows in groups.values():
+            slot = self.slots[rows[0]]
+            poses = np.stack([np.stack([_object_pose(self.slots[i], o) for o in slot.objects]) for i in rows])
+            near = slot.fields.query_links(pos[rows], poses)
+            phi[rows], grad[rows] = near.phi, near.grad
+        df = interaction_features(phi, grad, vel).reshape(n, -1)
+        return Obs(proprioception(qpos, qvel, last), root_command_to(qpos, target_q, target_v), df)
+
+    def meters(self) -> list[TaskMeter]:
+        return [s.meter for s in self.slots]
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+
+
+def _object_pose(slot: _Slot, o) -> np.ndarray:
+    adr = slot.scene.object_qpos_adr.get(o.name)
+    return slot.data.qpos[adr : adr + 7].copy() if adr is not None else o.pose[0]

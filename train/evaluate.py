@@ -1,0 +1,138 @@
+"""The paper's evaluation protocol (Table 2, App. "Evaluation Metrics"), one harness for every actor.
+
+Cells: PickUp at object scales 0.4 / 0.6 / 1.0 / 1.4 / 1.6, SitStand at 0.4 / 1.0 / 1.6, Push at 0.6 / 1.0 / 1.4
+(hand contact rate), Carry at 1.0 (:data:`TABLE2`). Per cell and evaluation seed, :attr:`EvalConfig.episodes`
+episodes of the task are drawn from the corpus (the seed picks them and perturbs the initial joint angles by
+:attr:`EvalConfig.joint_noise`), run at the scale in the interaction environment (:mod:`train.env`) and scored by
+:class:`train.tasks.TaskMeter`; a cell reports the mean and standard deviation over the seeds of the success
+rate (Push: of the mean contact rate). The same harness scores the student policy and the QP teacher tracking the
+fixed 1.0x reference (the paper's reference-based rows). Every result names its scale: episodes, seeds and what
+was scored (checkpoint and its training figures), so a CPU smoke number is never mistaken for a full one.
+"""
+
+from __future__ import annotations
+
+import json
+import zlib
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from pipeline.robot import JOINTS_QPOS
+from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
+from pipeline.stage.figure import save_figure
+from train.env import EnvConfig, InteractionEnv
+from train.episodes import TASKS, Episode
+
+TABLE2: dict[str, tuple[float, ...]] = {
+    "PickUp": (0.4, 0.6, 1.0, 1.4, 1.6),
+    "SitStand": (0.4, 1.0, 1.6),
+    "Push": (0.6, 1.0, 1.4),
+    "Carry": (1.0,),
+}
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    seeds: tuple[int, ...] = (0, 1, 2)
+    episodes: int = 4  # per cell and seed
+    envs: int = 8  # environments stepped together
+    threads: int = 1
+    joint_noise: float = 0.02  # rad, uniform: initial joint perturbation per episode
+    tasks: tuple[str, ...] = TASKS
+
+
+def _run(actor, batch: list[Episode], scale: float, rng: np.random.Generator, cfg: EvalConfig) -> list[dict]:
+    env = InteractionEnv(EnvConfig(threads=cfg.threads))
+    env.reset([(e, scale) for e in batch])
+    for s in env.slots:
+        q = s.data.qpos.copy()
+        q[JOINTS_QPOS] += rng.uniform(-cfg.joint_noise, cfg.joint_noise, JOINTS_QPOS.stop - JOINTS_QPOS.start)
+        s.set_state(q[:36], s.data.qvel[:35].copy(), q[36:])
+    actor.reset(env)
+    done = np.zeros(env.num_envs, bool)
+    while not done.all():
+        obs, done = env.step(actor.act(env))
+        actor.observe(obs)
+    env.close()
+    return [{**m.summary(), "fell": s.fell} for m, s in zip(env.meters(), env.slots)]
+
+
+def evaluate(actor, episodes: list[Episode], cfg: EvalConfig = EvalConfig(), label: str = "") -> dict:
+    """The Table 2 results of ``actor`` on the corpus ``episodes`` (module docstring)."""
+    by_task = {t: [e for e in episodes if e.task == t] for t in cfg.tasks}
+    cells = [(t, s) for t in cfg.tasks for s in TABLE2[t] if by_task[t]]
+    out = {"label": label, "config": asdict(cfg), "cells": {}}
+    for task, scale in tqdm(cells, desc=f"eval {label}", unit="cell"):
+        per_seed, outcomes = [], []
+        for seed in cfg.seeds:
+            rng = np.random.default_rng(zlib.crc32(f"{seed}|{task}|{scale}".encode()))
+            pick = rng.choice(len(by_task[task]), cfg.episodes, replace=len(by_task[task]) < cfg.episodes)
+            runs = []
+            for k in range(0, len(pick), cfg.envs):
+                runs += _run(actor, [by_task[task][i] for i in pick[k : k + cfg.envs]], scale, rng, cfg)
+            key = "contact_rate" if task == "Push" else "success"
+            per_seed.append(float(np.mean([r[key] for r in runs])))
+            outcomes += runs
+        out["cells"][f"{task}@{scale:g}"] = {
+            "task": task,
+            "scale": scale,
+            "metric": "contact_rate" if task == "Push" else "success_rate",
+            "mean": float(np.mean(per_seed)),
+            "std": float(np.std(per_seed)),
+            "per_seed": per_seed,
+            "episodes_per_seed": cfg.episodes,
+            "seeds": list(cfg.seeds),
+            "falls": int(sum(r["fell"] for r in outcomes)),
+        }
+    return out
+
+
+def markdown(results: list[dict]) -> str:
+    """The Table 2 layout, one row per result (mean +- std in %)."""
+    cols = [(t, s) for t in TASKS for s in TABLE2[t]]
+    head = "| | " + " | ".join(f"{t} {s:g}" for t, s in cols) + " |"
+    lines = [head, "|---" * (len(cols) + 1) + "|"]
+    for r in results:
+        cells = []
+        for t, s in cols:
+            c = r["cells"].get(f"{t}@{s:g}")
+            cells.append("-" if c is None else f"{100 * c['mean']:.1f} +- {100 * c['std']:.1f}")
+        lines.append(f"| {r['label']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(results: list[dict], path: Path) -> None:
+    """Success (Push: contact rate) against object scale, one panel per task, one line per result."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(TASKS), figsize=(4 * len(TASKS), 3.2), sharey=True)
+    for ax, task in zip(axes, TASKS):
+        for r in results:
+            cells = [c for c in r["cells"].values() if c["task"] == task]
+            if cells:
+                x = [c["scale"] for c in cells]
+                ax.errorbar(
+                    x, [100 * c["mean"] for c in cells], [100 * c["std"] for c in cells], marker="o", label=r["label"]
+                )
+        ax.set_title(task + (" (contact rate)" if task == "Push" else ""))
+        ax.set_xlabel("object scale")
+        ax.set_ylim(-5, 105)
+    axes[0].set_ylabel("%")
+    axes[-1].legend(fontsize=7)
+    save_figure(fig, path, dpi=100)
+
+
+def write(results: list[dict], out_dir: Path, scale_note: dict) -> Path:
+    """``eval.json`` (every result with ``scale_note``: what was scored, at what training scale), ``eval.md``
+    (the table) and ``eval.png`` in ``out_dir``."""
+    out_dir = Path(out_dir)
+    write_json_atomic(out_dir / "eval.json", {"scale": scale_note, "results": results})
+    write_bytes_atomic(out_dir / "eval.md", (json.dumps(scale_note, indent=1) + "\n\n" + markdown(results)).encode())
+    plot(results, out_dir / "eval.png")
+    return out_dir / "eval.json"

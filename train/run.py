@@ -1,0 +1,114 @@
+"""A training run (``lessmimic train-bc``): one folder ``runs/<RUN>/`` holding its config, checkpoints and logs.
+
+1. the DF-latent VAE and behaviour cloning on the corpus's features dataset (:func:`train.bc.train_bc`):
+   ``vae.pt``, ``bc_log.jsonl``, ``bc_report.json``, ``policy_bc.pt``;
+2. DAgger from the QP teacher in the interaction environment (:func:`train.dagger.dagger`):
+   ``dagger_log.jsonl``, ``policy_dagger<i>.pt``, ``dagger_data.pt``;
+3. ``policy.pt``: the run's policy, and ``report.json`` (written last) with the run's scale: corpus episodes and
+   frames, BC steps and samples, DAgger iterations and windows, seconds.
+
+A rerun with the same config resumes: finished parts are kept (the VAE, the BC policy, finished DAgger
+iterations); another config over an existing run folder stops with one line asking for ``--overwrite``.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from pipeline.errors import InputError
+from pipeline.stage.atomic import write_json_atomic
+from pipeline.stage.paths import stage_dir
+from train.bc import BCConfig, WindowTensors, train_bc
+from train.dagger import DAggerConfig, dagger
+from train.episodes import load_episodes
+from train.policy import PolicyConfig, load_policy, save_policy
+from train.vae import VAEConfig, split_episodes
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """A run's settings. The defaults are the laptop scale (~30-60 min on 2 CPU cores on the 100-clip corpus)."""
+
+    name: str = "corpus"  # the corpus: datasets/<name>/{features,physicalized,retargeted}
+    backbone: str = "transformer"
+    history: int = 5
+    vae_steps: int = 2000
+    bc_steps: int = 20000
+    batch: int = 256
+    dagger_iterations: int = 3
+    dagger_episodes: int = 16
+    dagger_fit_steps: int = 3000
+    envs: int = 8
+    seed: int = 0
+    device: str = "cpu"
+
+
+def _claim(run_dir: Path, config: TrainConfig, overwrite: bool) -> None:
+    """``run_dir`` holds this config's run (or none): a run of other settings there is a one-line error."""
+    settings, path = asdict(config), run_dir / "config.json"
+    if overwrite and run_dir.exists():
+        shutil.rmtree(run_dir)
+    if path.is_file():
+        recorded = json.loads(path.read_text())
+        if recorded != settings:
+            diff = ", ".join(sorted(k for k in settings if recorded.get(k) != settings[k]))
+            raise InputError(run_dir, "config", f"a run with other settings ({diff}) is here; pass --overwrite")
+    write_json_atomic(path, settings)
+
+
+def train(config: TrainConfig, run_dir: str | Path, *, overwrite: bool = False) -> dict:
+    """The run (module docstring); its report."""
+    run_dir, t0 = Path(run_dir), time.perf_counter()
+    features = stage_dir(config.name, "features")
+    if not (features / "meta" / "info.json").is_file():
+        raise InputError(
+            features, "meta/info.json", "no features dataset here: run `make corpus` (or the three stages) first"
+        )
+    episodes = load_episodes(config.name, valid_only=False)  # the features dataset's episodes, in its order
+    _claim(run_dir, config, overwrite)
+    policy_config = PolicyConfig(backbone=config.backbone, history=config.history)
+    bc = BCConfig(steps=config.bc_steps, batch=config.batch, seed=config.seed)
+    if not (run_dir / "policy_bc.pt").is_file():
+        report = train_bc(
+            features, run_dir, bc, policy_config, VAEConfig(), vae_steps=config.vae_steps, device=config.device
+        )
+        save_policy(
+            load_policy(run_dir / "policy.pt", device=config.device), run_dir / "policy_bc.pt", bc_report=report
+        )
+    policy = load_policy(run_dir / "policy_bc.pt", device=config.device)
+    train_eps, held = split_episodes(len(episodes), bc.holdout)
+    data = WindowTensors.from_dataset(features, config.history, train_eps)
+    heldout = WindowTensors.from_dataset(features, config.history, held) if held else None
+    dagger_config = DAggerConfig(
+        config.dagger_iterations,
+        config.dagger_episodes,
+        config.envs,
+        fit_steps=config.dagger_fit_steps,
+        seed=config.seed,
+    )
+    valid = [episodes[i] for i in train_eps if episodes[i].simulated.validation.get("valid", False)]
+    dagger(policy, data, valid, run_dir, dagger_config, bc, heldout)
+    rows = (run_dir / "dagger_log.jsonl").read_text().splitlines() if config.dagger_iterations else []
+    last = json.loads(rows[-1]) if rows else {}
+    report = {
+        "config": asdict(config),
+        "scale": {
+            "corpus_episodes": len(episodes),
+            "corpus_frames": sum(e.frames for e in episodes),
+            "bc_steps": config.bc_steps,
+            "bc_samples": config.bc_steps * config.batch,
+            "dagger_iterations": config.dagger_iterations,
+            "dagger_episodes_per_iteration": config.dagger_episodes,
+            "dagger_windows": last.get("aggregated_windows", 0),
+            "dagger_last": last,
+            "device": config.device,
+        },
+        "policy": str(run_dir / "policy.pt"),
+        "seconds": time.perf_counter() - t0,
+    }
+    write_json_atomic(run_dir / "report.json", report)
+    return report

@@ -1,0 +1,124 @@
+"""Task success, as the paper's appendix ("Evaluation Metrics") defines it, measured step by step on the
+simulated state (:class:`TaskMeter`, one per environment):
+
+* **PickUp** -- the box lifted more than :attr:`Rules.lift_m` above the ground (its lowest point) and held
+  there for :attr:`Rules.hold_s` without a break;
+* **SitStand** -- stable pelvis-chair contact (the pelvis or hip geoms touching the chair for
+  :attr:`Rules.sit_s`) with the root height within :attr:`Rules.seat_height_m`;
+* **Carry** -- the box picked up (lowest point above :attr:`Rules.pick_m`), never farther than
+  :attr:`Rules.carry_tolerance_m` from its reference track, and placed: at the end resting on the floor
+  (lowest point below :attr:`Rules.rest_m`) within that tolerance of the track's end;
+* **Push** -- the hand-object contact rate, over the frames the reference pushes (its hands on the object):
+  the share with a hand touching it; body-dominated contact (more frames of other links on the object than of
+  hands) counts as failure (rate 0). Its ``success`` is ``rate >= Rules.push_success_rate``.
+
+A fall (:func:`physicalize.rollout.fallen`) ends the episode; what was achieved before it stands.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from train.episodes import TASKS
+
+
+@dataclass(frozen=True)
+class Rules:
+    lift_m: float = 0.3
+    hold_s: float = 3.0
+    seat_height_m: tuple[float, float] = (0.3, 0.6)
+    sit_s: float = 1.0
+    pick_m: float = 0.1
+    rest_m: float = 0.05
+    carry_tolerance_m: float = 0.6
+    push_success_rate: float = 0.5
+
+
+@dataclass
+class StepFacts:
+    """What one control step measured in one environment (filled by the environment)."""
+
+    object_low: float  # the object's lowest point above the floor [m]
+    object_pos: np.ndarray  # (3,) its position
+    object_ref: np.ndarray  # (3,) its reference track's position at this step
+    root_z: float
+    pelvis_on_object: bool  # pelvis / hip geoms touching the object
+    hand_on_object: bool
+    body_on_object: bool  # another robot link (not hands, not feet) touching it
+    reference_pushing: bool  # the reference's hands touch the object at this step
+
+
+@dataclass
+class TaskMeter:
+    """Accumulates one episode's success figures (module docstring)."""
+
+    task: str
+    fps: float
+    rules: Rules = field(default_factory=Rules)
+    steps: int = 0
+    run: int = 0  # consecutive steps meeting PickUp's / SitStand's condition
+    best_run: int = 0
+    picked: bool = False
+    max_dev: float = 0.0
+    last: StepFacts | None = None
+    push_frames: int = 0
+    hand_frames: int = 0
+    body_frames: int = 0
+
+    def __post_init__(self):
+        if self.task not in TASKS:
+            raise ValueError(f"unknown task {self.task!r}; known: {TASKS}")
+
+    def update(self, f: StepFacts) -> None:
+        r = self.rules
+        self.steps += 1
+        self.last = f
+        if self.task == "PickUp":
+            held = f.object_low > r.lift_m
+        elif self.task == "SitStand":
+            held = f.pelvis_on_object and r.seat_height_m[0] <= f.root_z <= r.seat_height_m[1]
+        else:
+            held = False
+        self.run = self.run + 1 if held else 0
+        self.best_run = max(self.best_run, self.run)
+        self.picked |= f.object_low > r.pick_m
+        self.max_dev = max(self.max_dev, float(np.linalg.norm(f.object_pos - f.object_ref)))
+        if f.reference_pushing:
+            self.push_frames += 1
+            self.hand_frames += f.hand_on_object
+            self.body_frames += f.body_on_object
+
+    @property
+    def contact_rate(self) -> float:
+        """Push's hand-object contact rate (0 when body contact dominates or nothing was pushed)."""
+        if not self.push_frames or self.body_frames > self.hand_frames:
+            return 0.0
+        return self.hand_frames / self.push_frames
+
+    @property
+    def success(self) -> bool:
+        r = self.rules
+        if self.task == "PickUp":
+            return self.best_run >= r.hold_s * self.fps
+        if self.task == "SitStand":
+            return self.best_run >= r.sit_s * self.fps
+        if self.task == "Push":
+            return self.contact_rate >= r.push_success_rate
+        f = self.last
+        placed = (
+            f is not None
+            and f.object_low < r.rest_m
+            and float(np.linalg.norm(f.object_pos - f.object_ref)) <= (r.carry_tolerance_m)
+        )
+        return self.picked and self.max_dev <= r.carry_tolerance_m and placed
+
+    def summary(self) -> dict:
+        return {
+            "task": self.task,
+            "steps": self.steps,
+            "success": bool(self.success),
+            "contact_rate": self.contact_rate,
+            "max_object_dev_m": self.max_dev,
+        }
