@@ -92,9 +92,8 @@ def teacher_table(episodes) -> None:
             a = teacher.act(slot.data, slot.t)
             times.append(time.process_time() - c0)
             env.step(a[None])
-        print(
-            f"  {e.task:10s}{1000 * np.mean(times):8.2f} ms/query (p90 {1000 * np.percentile(times, 90):.2f}), {len(times)} queries"
-        )
+        p90 = 1000 * np.percentile(times, 90)
+        print(f"  {e.task:10s}{1000 * np.mean(times):8.2f} ms/query (p90 {p90:.2f}), {len(times)} queries")
 
 
 def bc_table(name: str) -> None:
