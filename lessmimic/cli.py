@@ -216,17 +216,19 @@ def _cmd_eval(a: argparse.Namespace) -> int:
 
     import torch
 
+    from pipeline.stage.paths import stage_dir
     from train.actors import PolicyActor, TeacherActor
     from train.episodes import load_episodes
     from train.evaluate import EvalConfig, evaluate, markdown, write
-    from train.policy import load_policy
+    from train.policy import dataset_layout, load_policy
 
     torch.set_num_threads(a.threads)
     episodes = load_episodes(a.name)
     cfg = EvalConfig(seeds=tuple(int(s) for s in a.seeds.split(",")), episodes=a.episodes, envs=a.envs)
     results, scale = [], {"corpus": a.name, "episodes_per_cell_and_seed": cfg.episodes, "seeds": list(cfg.seeds)}
     if a.policy:
-        policy = load_policy(a.policy)
+        layout = dataset_layout(stage_dir(a.name, "features"))  # the corpus's links and actuator profile
+        policy = load_policy(a.policy, {"links": layout.links, "actuator_profile": layout.actuator_profile})
         run = Path(a.policy).parent
         report = json.loads((run / "report.json").read_text()) if (run / "report.json").is_file() else {}
         scale["policy"] = {"checkpoint": str(a.policy), "training_scale": report.get("scale", "unknown")}

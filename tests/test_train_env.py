@@ -118,3 +118,43 @@ def test_the_evaluation_harness_scores_the_teacher(corpus):
     assert cells["PickUp@1"]["mean"] == 1.0 and cells["Push@1"]["mean"] > 0.9
     row = markdown([result]).splitlines()[2].split(" | ")
     assert row[0] == "| teacher" and row[3] == "100.0 +- 0.0" and row[6:9] == ["-", "-", "-"]  # PickUp 1.0; no SitStand
+
+
+def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):
+    """BC on the corpus, then DAgger: the student's visited states labelled by the teacher, the refit logged; a rerun
+    resumes after the finished iteration and a second iteration adds one row."""
+    import json
+
+    from train.bc import BCConfig, WindowTensors, train_bc
+    from train.dagger import DAggerConfig, dagger
+    from train.policy import PolicyConfig, load_policy
+    from train.vae import VAEConfig
+
+    features = stage_dir("train", "features")
+    train_bc(features, tmp_path, BCConfig(steps=30, log_every=10), PolicyConfig(), VAEConfig(), vae_steps=30)
+    data = WindowTensors.from_dataset(features, 5)
+    cfg = DAggerConfig(iterations=1, episodes=2, envs=2, fit_steps=20)
+    dagger(load_policy(tmp_path / "policy.pt"), data, corpus, tmp_path, cfg, BCConfig(log_every=10))
+    (row,) = [json.loads(line) for line in (tmp_path / "dagger_log.jsonl").open()]
+    assert row["beta"] == 0.5 and row["windows"] > 20 and row["windows"] == row["aggregated_windows"]
+    assert row["action_rmse"] > 0 and 0 <= row["success"] <= 1 and row["fit"]["step"] == 20
+    dagger(load_policy(tmp_path / "policy.pt"), data, corpus, tmp_path, cfg, BCConfig(log_every=10))  # resumed: done
+    assert len((tmp_path / "dagger_log.jsonl").read_text().splitlines()) == 1
+    dagger(load_policy(tmp_path / "policy.pt"), data, corpus, tmp_path, DAggerConfig(2, 2, 2, fit_steps=20), BCConfig())
+    rows = [json.loads(line) for line in (tmp_path / "dagger_log.jsonl").open()]
+    assert [r["iteration"] for r in rows] == [0, 1] and rows[1]["beta"] == 0.25
+    assert rows[1]["aggregated_windows"] == rows[0]["windows"] + rows[1]["windows"]
+
+
+def test_train_and_eval_commands_refuse_bad_input_with_one_line(corpus, tmp_path, capsys):
+    from lessmimic.cli import main
+
+    assert main(["train-bc", "--name", "missing", "--run", str(tmp_path / "r")]) == 2
+    assert main(["eval", "--name", "train"]) == 2  # nothing to evaluate
+    (tmp_path / "bad.pt").write_bytes(b"not a checkpoint")
+    assert main(["eval", "--name", "train", "--policy", str(tmp_path / "bad.pt")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3 and "no features dataset here" in err[0] and "nothing to evaluate" in err[1]
+    assert "bad.pt: format: not a torch checkpoint" in err[2]
+    with pytest.raises(InputError, match="task: unknown task; known: PickUp"):
+        load_episodes("train", ("Dance",))
