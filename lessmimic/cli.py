@@ -194,6 +194,7 @@ def _cmd_train_bc(a: argparse.Namespace) -> int:
         bc_steps=a.bc_steps,
         dagger_iterations=a.dagger_iterations,
         dagger_episodes=a.dagger_episodes,
+        dagger_probe=a.dagger_probe,
         dagger_fit_steps=a.dagger_fit_steps,
         envs=a.envs,
         seed=a.seed,
@@ -400,12 +401,18 @@ def _add_train(sub) -> None:
     p.add_argument("--run", default="runs/bc", help="the run folder (default runs/bc); a rerun resumes")
     p.add_argument("--overwrite", action="store_true", help="start the run afresh")
     p.add_argument("--backbone", choices=("transformer", "mlp"), default="transformer", help="policy backbone")
-    p.add_argument("--vae-steps", type=int, default=2000)
-    p.add_argument("--bc-steps", type=int, default=20000, help="behaviour-cloning steps (batch 256)")
-    p.add_argument("--dagger-iterations", type=int, default=3)
-    p.add_argument("--dagger-episodes", type=int, default=16, help="episodes rolled out per DAgger iteration")
-    p.add_argument("--dagger-fit-steps", type=int, default=3000)
-    p.add_argument("--envs", type=int, default=8, help="environments stepped together")
+    from train.run import TrainConfig  # the defaults: the laptop scale
+
+    d = TrainConfig()
+    p.add_argument("--vae-steps", type=int, default=d.vae_steps)
+    p.add_argument("--bc-steps", type=int, default=d.bc_steps, help=f"behaviour-cloning steps (batch {d.batch})")
+    p.add_argument("--dagger-iterations", type=int, default=d.dagger_iterations)
+    p.add_argument(
+        "--dagger-episodes", type=int, default=d.dagger_episodes, help="episodes per DAgger iteration (beta-mixture)"
+    )
+    p.add_argument("--dagger-probe", type=int, default=d.dagger_probe, help="student-only episodes per iteration")
+    p.add_argument("--dagger-fit-steps", type=int, default=d.dagger_fit_steps)
+    p.add_argument("--envs", type=int, default=d.envs, help="environments stepped together")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (1 is fastest on a loaded 2-core machine)")

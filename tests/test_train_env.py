@@ -13,7 +13,7 @@ from retarget.stage import run_stage as retarget_stage
 from train.actors import TeacherActor
 from train.env import InteractionEnv
 from train.episodes import load_episodes, scaled_objects
-from train.evaluate import EvalConfig, evaluate, markdown
+from train.evaluate import EvalConfig, evaluate, markdown, scale_line
 from train.teacher import Teacher
 
 
@@ -118,12 +118,15 @@ def test_the_evaluation_harness_scores_the_teacher(corpus):
     assert cells["PickUp@1"]["mean"] == 1.0 and cells["Push@1"]["mean"] > 0.9
     row = markdown([result]).splitlines()[2].split(" | ")
     assert row[0] == "| teacher" and row[3] == "100.0 +- 0.0" and row[6:9] == ["-", "-", "-"]  # PickUp 1.0; no SitStand
+    note = {"corpus": "train", "episodes_per_cell_and_seed": 1, "seeds": [0], "policy": {"checkpoint": "p.pt"}}
+    assert "1 episodes per cell and seed" in scale_line(note) and "trained on unknown" in scale_line(note)
 
 
 def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):
     """BC on the corpus, then DAgger: the student's visited states labelled by the teacher, the refit logged; a rerun
     resumes after the finished iteration and a second iteration adds one row."""
     import json
+    from dataclasses import replace
 
     from train.bc import BCConfig, WindowTensors, train_bc
     from train.dagger import DAggerConfig, dagger
@@ -133,17 +136,20 @@ def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):
     features = stage_dir("train", "features")
     train_bc(features, tmp_path, BCConfig(steps=30, log_every=10), PolicyConfig(), VAEConfig(), vae_steps=30)
     data = WindowTensors.from_dataset(features, 5)
-    cfg = DAggerConfig(iterations=1, episodes=2, envs=2, fit_steps=20)
+    cfg = DAggerConfig(iterations=1, episodes=2, probe=1, envs=2, fit_steps=20)
     dagger(load_policy(tmp_path / "policy.pt"), data, corpus, tmp_path, cfg, BCConfig(log_every=10))
     (row,) = [json.loads(line) for line in (tmp_path / "dagger_log.jsonl").open()]
-    assert row["beta"] == 0.5 and row["windows"] > 20 and row["windows"] == row["aggregated_windows"]
+    student = row["student"]
+    assert row["beta"] == 0.5 and row["windows"] > 20 and student["windows"] > 0
+    assert row["aggregated_windows"] == row["windows"] + student["windows"]
     assert row["action_rmse"] > 0 and 0 <= row["success"] <= 1 and row["fit"]["step"] == 20
     dagger(load_policy(tmp_path / "policy.pt"), data, corpus, tmp_path, cfg, BCConfig(log_every=10))  # resumed: done
     assert len((tmp_path / "dagger_log.jsonl").read_text().splitlines()) == 1
-    dagger(load_policy(tmp_path / "policy.pt"), data, corpus, tmp_path, DAggerConfig(2, 2, 2, fit_steps=20), BCConfig())
+    dagger(load_policy(tmp_path / "policy.pt"), data, corpus, tmp_path, replace(cfg, iterations=2), BCConfig())
     rows = [json.loads(line) for line in (tmp_path / "dagger_log.jsonl").open()]
-    assert [r["iteration"] for r in rows] == [0, 1] and rows[1]["beta"] == 0.25
-    assert rows[1]["aggregated_windows"] == rows[0]["windows"] + rows[1]["windows"]
+    assert [r["iteration"] for r in rows] == [0, 1] and rows[1]["beta"] == pytest.approx(0.5 * cfg.beta_decay)
+    new = rows[1]["windows"] + rows[1]["student"]["windows"]
+    assert rows[1]["aggregated_windows"] == rows[0]["aggregated_windows"] + new
 
 
 def test_train_and_eval_commands_refuse_bad_input_with_one_line(corpus, tmp_path, capsys):

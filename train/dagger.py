@@ -5,12 +5,19 @@ refitted. Read top to bottom:
 1. iteration ``i`` runs :attr:`DAggerConfig.episodes` training episodes at scale 1.0 in ``envs`` environments; at
    every step each environment executes the teacher's targets with probability ``beta_i = beta0 * decay^i`` and
    the student's otherwise (the beta-mixture of DAgger's policy ``pi_i = beta_i pi* + (1 - beta_i) pi_hat_i``),
-   and records the student's observation window with the teacher's targets for that state as its label;
+   and records the student's observation window with the teacher's targets for that state as its label; then the
+   student alone (beta 0) runs :attr:`DAggerConfig.probe` fixed episodes (the same every iteration, tasks in
+   turn), labelled and aggregated the same way: its figures say how the student itself does;
 2. the aggregated windows (all iterations so far) and the dataset's windows train the student for ``fit_steps``
    (:func:`train.bc.fit`);
 3. a row of ``dagger_log.jsonl`` per iteration: beta, the on-policy student-teacher action error (RMS over
-   joints, on the states the student visited), mean episode length, falls and task success of the rollouts,
-   windows aggregated, and the refit's losses.
+   joints, on the states the student visited), mean episode length, falls and task success of the mixture's
+   rollouts and (``student``) of the student's own, windows aggregated, and the refit's losses.
+
+Measured (laptop run, 93-clip corpus, transformer, 2 CPU cores): the BC-only student falls within ~1.7 s (86 steps
+mean over 8 probe episodes); six iterations of 32 episodes at beta 0.3 took it to 215 steps and 2 of 8 successes.
+Masking the previous actions out of the input (the copycat problem of BC over histories) changed nothing (56 vs 62
+steps after 6000 BC steps), so they stay in, as in the paper's o_prop.
 
 Each iteration's policy (``policy_dagger<i>.pt``) and aggregated windows (``dagger_data.pt``) are kept in the run
 folder: a rerun resumes after the last finished iteration. Deterministic for a seed on the CPU.
@@ -38,10 +45,11 @@ from train.policy import InteractionPolicy, load_policy, save_policy
 @dataclass(frozen=True)
 class DAggerConfig:
     iterations: int = 3
-    episodes: int = 16  # rolled out per iteration
+    episodes: int = 16  # rolled out per iteration under the beta-mixture
+    probe: int = 8  # rolled out per iteration by the student alone
     envs: int = 8
     beta0: float = 0.5
-    beta_decay: float = 0.5
+    beta_decay: float = 0.85
     fit_steps: int = 2000
     seed: int = 0
 
@@ -86,6 +94,16 @@ def collect(
     return data, figures
 
 
+def probe_episodes(episodes: list[Episode], count: int, seed: int) -> list[Episode]:
+    """``count`` episodes, the tasks in turn, drawn once for a seed."""
+    rng = np.random.default_rng([seed, 99])
+    by_task: dict[str, list[Episode]] = {}
+    for i in rng.permutation(len(episodes)):
+        by_task.setdefault(episodes[i].task, []).append(episodes[i])
+    queues = list(by_task.values())
+    return [queues[k % len(queues)][(k // len(queues)) % len(queues[k % len(queues)])] for k in range(count)]
+
+
 def _device(policy: InteractionPolicy) -> torch.device:
     return next(policy.backbone.parameters()).device
 
@@ -115,13 +133,19 @@ def dagger(
         aggregated = WindowTensors(**torch.load(data_path, weights_only=True))
         policy = load_policy(run_dir / f"policy_dagger{len(done_rows) - 1}.pt", device=_device(policy))
     teacher = TeacherActor(policy.layout.actuator_profile)
+    probe = probe_episodes(episodes, config.probe, config.seed)
     for it in tqdm(range(len(done_rows), config.iterations), desc="dagger", unit="iteration"):
         rng = np.random.default_rng([config.seed, it])
         order = rng.permutation(len(episodes))
         chosen = [episodes[i] for i in np.resize(order, config.episodes)]
         beta = config.beta0 * config.beta_decay**it
         new, figures = collect(policy, teacher, chosen, beta, rng, config.envs)
-        aggregated = new if aggregated is None else WindowTensors.concat([aggregated, new])
+        parts = [new]
+        if probe:
+            own, student = collect(policy, teacher, probe, 0.0, rng, config.envs)
+            figures["student"] = student
+            parts.append(own)
+        aggregated = WindowTensors.concat(([] if aggregated is None else [aggregated]) + parts)
         torch.manual_seed(config.seed + it)
         history = fit(
             policy,

@@ -12,9 +12,8 @@ was scored (checkpoint and its training figures), so a CPU smoke number is never
 
 from __future__ import annotations
 
-import json
 import zlib
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +24,7 @@ from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
 from pipeline.stage.figure import save_figure
 from train.env import EnvConfig, InteractionEnv
 from train.episodes import TASKS, Episode
+from train.tasks import Rules
 
 TABLE2: dict[str, tuple[float, ...]] = {
     "PickUp": (0.4, 0.6, 1.0, 1.4, 1.6),
@@ -42,10 +42,11 @@ class EvalConfig:
     threads: int = 1
     joint_noise: float = 0.02  # rad, uniform: initial joint perturbation per episode
     tasks: tuple[str, ...] = TASKS
+    rules: Rules = field(default_factory=Rules)
 
 
 def _run(actor, batch: list[Episode], scale: float, rng: np.random.Generator, cfg: EvalConfig) -> list[dict]:
-    env = InteractionEnv(EnvConfig(threads=cfg.threads))
+    env = InteractionEnv(EnvConfig(threads=cfg.threads, rules=cfg.rules))
     env.reset([(e, scale) for e in batch])
     for s in env.slots:
         q = s.data.qpos.copy()
@@ -86,8 +87,20 @@ def evaluate(actor, episodes: list[Episode], cfg: EvalConfig = EvalConfig(), lab
             "episodes_per_seed": cfg.episodes,
             "seeds": list(cfg.seeds),
             "falls": int(sum(r["fell"] for r in outcomes)),
+            "mean_steps": float(np.mean([r["steps"] for r in outcomes])),
+            **(_seated(outcomes, cfg) if task == "SitStand" else {}),
         }
     return out
+
+
+def _seated(outcomes: list[dict], cfg: EvalConfig) -> dict:
+    """Why SitStand cells fail: the share of episodes with pelvis-chair contact for the rule's duration at any root
+    height, and the median root height in contact (the rule also asks for 0.3-0.6 m)."""
+    z = [r["seated_root_z_m"] for r in outcomes if r["seated_root_z_m"] is not None]
+    return {
+        "seated_any_height_rate": float(np.mean([r["seated_s"] >= cfg.rules.sit_s for r in outcomes])),
+        "seated_root_z_m": float(np.median(z)) if z else None,
+    }
 
 
 def markdown(results: list[dict]) -> str:
@@ -102,6 +115,26 @@ def markdown(results: list[dict]) -> str:
             cells.append("-" if c is None else f"{100 * c['mean']:.1f} +- {100 * c['std']:.1f}")
         lines.append(f"| {r['label']} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def scale_line(note: dict) -> str:
+    """What the table's numbers are worth, in one line: the corpus, episodes, seeds and the policy's training scale."""
+    line = (
+        f"Scale: corpus `{note['corpus']}`, {note['episodes_per_cell_and_seed']} episodes per cell and seed, "
+        f"seeds {', '.join(map(str, note['seeds']))}; success in % (Push: hand contact rate), mean +- std over seeds."
+    )
+    policy = note.get("policy")
+    if policy:
+        s = policy.get("training_scale")
+        trained = (
+            f"{s['corpus_episodes']} corpus episodes ({s['corpus_frames']} frames), BC {s['bc_steps']} steps "
+            f"({s['bc_samples']} samples), DAgger {s['dagger_iterations']} iterations x "
+            f"{s['dagger_episodes_per_iteration']} episodes ({s['dagger_windows']} windows), on {s['device']}"
+            if isinstance(s, dict)
+            else "unknown (no report.json beside it)"
+        )
+        line += f" Policy `{policy['checkpoint']}`, trained on {trained}."
+    return line
 
 
 def plot(results: list[dict], path: Path) -> None:
@@ -133,6 +166,6 @@ def write(results: list[dict], out_dir: Path, scale_note: dict) -> Path:
     (the table) and ``eval.png`` in ``out_dir``."""
     out_dir = Path(out_dir)
     write_json_atomic(out_dir / "eval.json", {"scale": scale_note, "results": results})
-    write_bytes_atomic(out_dir / "eval.md", (json.dumps(scale_note, indent=1) + "\n\n" + markdown(results)).encode())
+    write_bytes_atomic(out_dir / "eval.md", (scale_line(scale_note) + "\n\n" + markdown(results)).encode())
     plot(results, out_dir / "eval.png")
     return out_dir / "eval.json"

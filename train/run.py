@@ -37,11 +37,12 @@ class TrainConfig:
     backbone: str = "transformer"
     history: int = 5
     vae_steps: int = 2000
-    bc_steps: int = 20000
+    bc_steps: int = 8000
     batch: int = 256
-    dagger_iterations: int = 3
-    dagger_episodes: int = 16
-    dagger_fit_steps: int = 3000
+    dagger_iterations: int = 10
+    dagger_episodes: int = 32
+    dagger_probe: int = 8
+    dagger_fit_steps: int = 1500
     envs: int = 8
     seed: int = 0
     device: str = "cpu"
@@ -84,9 +85,10 @@ def train(config: TrainConfig, run_dir: str | Path, *, overwrite: bool = False) 
     data = WindowTensors.from_dataset(features, config.history, train_eps)
     heldout = WindowTensors.from_dataset(features, config.history, held) if held else None
     dagger_config = DAggerConfig(
-        config.dagger_iterations,
-        config.dagger_episodes,
-        config.envs,
+        iterations=config.dagger_iterations,
+        episodes=config.dagger_episodes,
+        probe=config.dagger_probe,
+        envs=config.envs,
         fit_steps=config.dagger_fit_steps,
         seed=config.seed,
     )

@@ -66,6 +66,9 @@ class TaskMeter:
     push_frames: int = 0
     hand_frames: int = 0
     body_frames: int = 0
+    seat_run: int = 0  # consecutive steps of pelvis-chair contact at any root height (SitStand's diagnosis)
+    best_seat_run: int = 0
+    seat_root_z: list[float] = field(default_factory=list)  # root heights while the pelvis touches the chair
 
     def __post_init__(self):
         if self.task not in TASKS:
@@ -83,6 +86,11 @@ class TaskMeter:
             held = False
         self.run = self.run + 1 if held else 0
         self.best_run = max(self.best_run, self.run)
+        if self.task == "SitStand":
+            self.seat_run = self.seat_run + 1 if f.pelvis_on_object else 0
+            self.best_seat_run = max(self.best_seat_run, self.seat_run)
+            if f.pelvis_on_object:
+                self.seat_root_z.append(f.root_z)
         self.picked |= f.object_low > r.pick_m
         self.max_dev = max(self.max_dev, float(np.linalg.norm(f.object_pos - f.object_ref)))
         if f.reference_pushing:
@@ -115,10 +123,16 @@ class TaskMeter:
         return self.picked and self.max_dev <= r.carry_tolerance_m and placed
 
     def summary(self) -> dict:
-        return {
+        """The episode's figures; SitStand adds why a sit failed: the longest pelvis-chair contact at any root
+        height (``seated_s``) and the median root height during contact (``seated_root_z_m``, None if none)."""
+        out = {
             "task": self.task,
             "steps": self.steps,
             "success": bool(self.success),
             "contact_rate": self.contact_rate,
             "max_object_dev_m": self.max_dev,
         }
+        if self.task == "SitStand":
+            out["seated_s"] = self.best_seat_run / self.fps
+            out["seated_root_z_m"] = float(np.median(self.seat_root_z)) if self.seat_root_z else None
+        return out

@@ -1,0 +1,89 @@
+"""The paper's success rules (App. "Evaluation Metrics") on hand-made step sequences: each rule passes at its
+threshold and fails just short of it."""
+
+import numpy as np
+import pytest
+
+from train.tasks import Rules, StepFacts, TaskMeter
+
+FPS = 50.0
+
+
+def facts(**kw) -> StepFacts:
+    base = dict(
+        object_low=0.0,
+        object_pos=np.zeros(3),
+        object_ref=np.zeros(3),
+        root_z=0.75,
+        pelvis_on_object=False,
+        hand_on_object=False,
+        body_on_object=False,
+        reference_pushing=False,
+    )
+    return StepFacts(**{**base, **kw})
+
+
+def run(task: str, steps: list[StepFacts]) -> TaskMeter:
+    meter = TaskMeter(task, FPS)
+    for f in steps:
+        meter.update(f)
+    return meter
+
+
+@pytest.mark.parametrize(("seconds", "low", "expected"), [(3.0, 0.31, True), (2.98, 0.31, False), (3.0, 0.29, False)])
+def test_pickup_needs_the_box_above_0_3_m_for_3_s(seconds, low, expected):
+    held = [facts(object_low=low)] * int(round(seconds * FPS))
+    assert run("PickUp", [facts()] * 10 + held + [facts()] * 5).success is expected
+
+
+def test_pickup_hold_must_be_unbroken():
+    half = [facts(object_low=0.5)] * int(2 * FPS)
+    assert not run("PickUp", half + [facts(object_low=0.1)] + half).success
+
+
+@pytest.mark.parametrize(("root_z", "expected"), [(0.55, True), (0.3, True), (0.6, True), (0.62, False), (0.25, False)])
+def test_sitstand_needs_pelvis_contact_with_the_root_in_0_3_0_6_m(root_z, expected):
+    seated = [facts(pelvis_on_object=True, root_z=root_z)] * int(Rules().sit_s * FPS)
+    meter = run("SitStand", [facts()] * 20 + seated + [facts()] * 20)
+    assert meter.success is expected
+    summary = meter.summary()
+    assert summary["seated_s"] == pytest.approx(Rules().sit_s) and summary["seated_root_z_m"] == pytest.approx(root_z)
+
+
+def test_sitstand_contact_must_last():
+    short = [facts(pelvis_on_object=True, root_z=0.5)] * (int(Rules().sit_s * FPS) - 1)
+    meter = run("SitStand", short)
+    assert not meter.success and run("SitStand", [facts()]).summary()["seated_root_z_m"] is None
+
+
+def _carry(max_dev: float, end_low: float, picked: bool = True) -> list[StepFacts]:
+    ref = np.zeros(3)
+    lift = [facts(object_low=0.4 if picked else 0.0, object_pos=np.array([max_dev, 0, 0]), object_ref=ref)]
+    return [facts()] * 5 + lift * 20 + [facts(object_low=end_low, object_pos=np.array([0.1, 0, 0]), object_ref=ref)]
+
+
+@pytest.mark.parametrize(
+    ("steps", "expected"),
+    [
+        (_carry(0.5, 0.0), True),
+        (_carry(0.61, 0.0), False),  # strayed more than 0.6 m from the track once
+        (_carry(0.5, 0.2), False),  # not put down
+        (_carry(0.5, 0.0, picked=False), False),  # never picked up
+    ],
+)
+def test_carry_picks_follows_within_0_6_m_and_places(steps, expected):
+    assert run("Carry", steps).success is expected
+
+
+def test_push_rate_counts_hand_contact_while_the_reference_pushes_and_body_contact_fails():
+    pushing = [facts(reference_pushing=True, hand_on_object=True)] * 30 + [facts(reference_pushing=True)] * 10
+    meter = run("Push", [facts(hand_on_object=True)] * 50 + pushing)  # contact outside the push does not count
+    assert meter.contact_rate == pytest.approx(0.75) and meter.success
+    leaning = [facts(reference_pushing=True, hand_on_object=True, body_on_object=True)] * 10
+    leaning += [facts(reference_pushing=True, body_on_object=True)] * 11
+    assert run("Push", leaning).contact_rate == 0.0
+
+
+def test_unknown_task_is_refused():
+    with pytest.raises(ValueError, match="unknown task"):
+        TaskMeter("Dance", FPS)
