@@ -142,7 +142,7 @@ def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):
     student = row["student"]
     assert row["beta"] == 0.5 and row["windows"] > 20 and student["windows"] > 0
     assert row["aggregated_windows"] == row["windows"] + student["windows"]
-    assert row["action_rmse"] > 0 and 0 <= row["success"] <= 1 and row["fit"]["step"] == 20
+    assert row["action_rmse"] > 0 and 0 <= row["success"] <= 1 and row["fit"]["step"] == 20 and row["seconds"] > 0
     dagger(load_policy(tmp_path / "policy.pt"), data, corpus, tmp_path, cfg, BCConfig(log_every=10))  # resumed: done
     assert len((tmp_path / "dagger_log.jsonl").read_text().splitlines()) == 1
     dagger(load_policy(tmp_path / "policy.pt"), data, corpus, tmp_path, replace(cfg, iterations=2), BCConfig())
@@ -164,3 +164,17 @@ def test_train_and_eval_commands_refuse_bad_input_with_one_line(corpus, tmp_path
     assert "bad.pt: format: not a torch checkpoint" in err[2]
     with pytest.raises(InputError, match="task: unknown task; known: PickUp"):
         load_episodes("train", ("Dance",))
+
+
+def test_a_run_folder_takes_more_dagger_iterations_and_refuses_other_settings(tmp_path):
+    from train.run import TrainConfig, _claim
+
+    run = tmp_path / "run"
+    _claim(run, TrainConfig(dagger_iterations=2), overwrite=False)
+    _claim(run, TrainConfig(dagger_iterations=4), overwrite=False)  # a longer DAgger run continues this one
+    assert '"dagger_iterations": 4' in (run / "config.json").read_text()
+    for other in (TrainConfig(dagger_iterations=3), TrainConfig(dagger_iterations=4, bc_steps=1)):
+        with pytest.raises(InputError, match="config: a run with other settings .* pass --overwrite"):
+            _claim(run, other, overwrite=False)
+    _claim(run, TrainConfig(bc_steps=1), overwrite=True)
+    assert '"bc_steps": 1' in (run / "config.json").read_text()

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import io
 import json
+import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -135,6 +136,7 @@ def dagger(
     teacher = TeacherActor(policy.layout.actuator_profile)
     probe = probe_episodes(episodes, config.probe, config.seed)
     for it in tqdm(range(len(done_rows), config.iterations), desc="dagger", unit="iteration"):
+        t0 = time.perf_counter()
         rng = np.random.default_rng([config.seed, it])
         order = rng.permutation(len(episodes))
         chosen = [episodes[i] for i in np.resize(order, config.episodes)]
@@ -159,6 +161,7 @@ def dagger(
             **figures,
             "aggregated_windows": len(aggregated),
             "fit": history[-1] if history else {},
+            "seconds": time.perf_counter() - t0,
         }
         save_policy(policy, run_dir / f"policy_dagger{it}.pt")
         _save(aggregated, data_path)

@@ -8,14 +8,15 @@
    frames, BC steps and samples, DAgger iterations and windows, seconds.
 
 A rerun with the same config resumes: finished parts are kept (the VAE, the BC policy, finished DAgger
-iterations); another config over an existing run folder stops with one line asking for ``--overwrite``.
+iterations). A rerun asking only for more DAgger iterations continues the run (iteration ``i`` depends on the
+iterations before it and never on their number, so the result is the longer run's); any other config over an
+existing run folder stops with one line asking for ``--overwrite``.
 """
 
 from __future__ import annotations
 
 import json
 import shutil
-import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -39,7 +40,7 @@ class TrainConfig:
     vae_steps: int = 2000
     bc_steps: int = 8000
     batch: int = 256
-    dagger_iterations: int = 10
+    dagger_iterations: int = 20
     dagger_episodes: int = 32
     dagger_probe: int = 8
     dagger_fit_steps: int = 1500
@@ -49,21 +50,24 @@ class TrainConfig:
 
 
 def _claim(run_dir: Path, config: TrainConfig, overwrite: bool) -> None:
-    """``run_dir`` holds this config's run (or none): a run of other settings there is a one-line error."""
+    """``run_dir`` holds this config's run (or none) or a shorter DAgger run of it; a run of other settings there is
+    a one-line error."""
     settings, path = asdict(config), run_dir / "config.json"
     if overwrite and run_dir.exists():
         shutil.rmtree(run_dir)
     if path.is_file():
         recorded = json.loads(path.read_text())
-        if recorded != settings:
-            diff = ", ".join(sorted(k for k in settings if recorded.get(k) != settings[k]))
-            raise InputError(run_dir, "config", f"a run with other settings ({diff}) is here; pass --overwrite")
+        diff = sorted(k for k in settings if recorded.get(k) != settings[k])
+        longer = diff == ["dagger_iterations"] and settings["dagger_iterations"] > recorded["dagger_iterations"]
+        if diff and not longer:
+            msg = f"a run with other settings ({', '.join(diff)}) is here; pass --overwrite"
+            raise InputError(run_dir, "config", msg)
     write_json_atomic(path, settings)
 
 
 def train(config: TrainConfig, run_dir: str | Path, *, overwrite: bool = False) -> dict:
     """The run (module docstring); its report."""
-    run_dir, t0 = Path(run_dir), time.perf_counter()
+    run_dir = Path(run_dir)
     features = stage_dir(config.name, "features")
     if not (features / "meta" / "info.json").is_file():
         raise InputError(
@@ -95,7 +99,9 @@ def train(config: TrainConfig, run_dir: str | Path, *, overwrite: bool = False) 
     valid = [episodes[i] for i in train_eps if episodes[i].simulated.validation.get("valid", False)]
     dagger(policy, data, valid, run_dir, dagger_config, bc, heldout)
     rows = (run_dir / "dagger_log.jsonl").read_text().splitlines() if config.dagger_iterations else []
-    last = json.loads(rows[-1]) if rows else {}
+    rows = [json.loads(r) for r in rows]
+    last = rows[-1] if rows else {}
+    bc_seconds = json.loads((run_dir / "bc_report.json").read_text()).get("seconds", 0.0)
     report = {
         "config": asdict(config),
         "scale": {
@@ -110,7 +116,7 @@ def train(config: TrainConfig, run_dir: str | Path, *, overwrite: bool = False) 
             "device": config.device,
         },
         "policy": str(run_dir / "policy.pt"),
-        "seconds": time.perf_counter() - t0,
+        "seconds": bc_seconds + sum(r.get("seconds", 0.0) for r in rows),  # summed over resumed parts
     }
     write_json_atomic(run_dir / "report.json", report)
     return report
