@@ -23,8 +23,8 @@ def facts(**kw) -> StepFacts:
     return StepFacts(**{**base, **kw})
 
 
-def run(task: str, steps: list[StepFacts]) -> TaskMeter:
-    meter = TaskMeter(task, FPS)
+def run(task: str, steps: list[StepFacts], track_end=(0.0, 0.0, 0.0)) -> TaskMeter:
+    meter = TaskMeter(task, FPS, track_end=np.array(track_end))
     for f in steps:
         meter.update(f)
     return meter
@@ -75,6 +75,14 @@ def test_carry_picks_follows_within_0_6_m_and_places(steps, expected):
     assert run("Carry", steps).success is expected
 
 
+def test_carry_placed_means_at_the_track_end_not_where_a_fall_dropped_it():
+    dropped = _carry(0.5, 0.0)  # on the floor, on the track at the last step, but the track goes on to x = 2 m
+    assert not run("Carry", dropped, track_end=(2.0, 0.0, 0.0)).success
+    assert run("Carry", dropped, track_end=(0.5, 0.0, 0.0)).success
+    with pytest.raises(ValueError, match="track_end"):
+        TaskMeter("Carry", FPS)
+
+
 def test_push_rate_counts_hand_contact_while_the_reference_pushes_and_body_contact_fails():
     pushing = [facts(reference_pushing=True, hand_on_object=True)] * 30 + [facts(reference_pushing=True)] * 10
     meter = run("Push", [facts(hand_on_object=True)] * 50 + pushing)  # contact outside the push does not count
@@ -82,6 +90,13 @@ def test_push_rate_counts_hand_contact_while_the_reference_pushes_and_body_conta
     leaning = [facts(reference_pushing=True, hand_on_object=True, body_on_object=True)] * 10
     leaning += [facts(reference_pushing=True, body_on_object=True)] * 11
     assert run("Push", leaning).contact_rate == 0.0
+
+
+def test_push_rate_counts_the_pushing_frames_after_a_fall_as_without_contact():
+    meter = TaskMeter("Push", FPS, push_total=40)  # the reference pushes 40 frames; the episode ends after 20
+    for f in [facts(reference_pushing=True, hand_on_object=True)] * 20:
+        meter.update(f)
+    assert meter.contact_rate == pytest.approx(0.5)
 
 
 def test_unknown_task_is_refused():

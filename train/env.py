@@ -93,7 +93,10 @@ class _Slot:
             if wrists and sim.robot.contacts is not None
             else np.zeros(sim.frames, bool)
         )
-        self.meter = TaskMeter(episode.task, sim.robot.fps, cfg.rules)
+        end = self.objects[0].pose[sim.frames - 1, :3] if self.objects else None
+        self.meter = TaskMeter(
+            episode.task, sim.robot.fps, cfg.rules, track_end=end, push_total=int(self.pushing[1:].sum())
+        )
         self.t, self.done, self.fell = 0, False, False
         self.last_action = np.zeros(NUM_JOINTS)
         self.set_state(sim.robot.qpos[0], sim.qvel[0])

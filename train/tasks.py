@@ -6,10 +6,14 @@ simulated state (:class:`TaskMeter`, one per environment):
 * **SitStand** -- stable pelvis-chair contact (the pelvis or hip geoms touching the chair for
   :attr:`Rules.sit_s`) with the root height within :attr:`Rules.seat_height_m`;
 * **Carry** -- the box picked up (lowest point above :attr:`Rules.pick_m`), never farther than
-  :attr:`Rules.carry_tolerance_m` from its reference track, and placed: at the end resting on the floor
-  (lowest point below :attr:`Rules.rest_m`) within that tolerance of the track's end;
-* **Push** -- the hand-object contact rate, over the frames the reference pushes (its hands on the object):
-  the share with a hand touching it; body-dominated contact (more frames of other links on the object than of
+  :attr:`Rules.carry_tolerance_m` from its reference track, and placed: at the episode's last step resting on the
+  floor (lowest point below :attr:`Rules.rest_m`) within that tolerance of the track's end
+  (:attr:`TaskMeter.track_end`; measured: comparing with the track at the last step instead credited a policy that
+  fell with the box, 25% of episodes);
+* **Push** -- the hand-object contact rate, over the frames the reference pushes (its hands on the object) in
+  the whole episode (:attr:`TaskMeter.push_total`): the share with a hand touching it, so the pushing frames after
+  a fall count as without contact (measured: counting only the frames before the fall gave a policy that fell in
+  every episode 82% at scale 1.0); body-dominated contact (more frames of other links on the object than of
   hands) counts as failure (rate 0). Its ``success`` is ``rate >= Rules.push_success_rate``.
 
 A fall (:func:`physicalize.rollout.fallen`) ends the episode; what was achieved before it stands.
@@ -63,7 +67,9 @@ class TaskMeter:
     picked: bool = False
     max_dev: float = 0.0
     last: StepFacts | None = None
-    push_frames: int = 0
+    track_end: np.ndarray | None = None  # Carry: the object's reference position at the track's end
+    push_total: int = 0  # the frames the reference pushes in the whole episode (the rate's denominator)
+    push_frames: int = 0  # of them, the frames stepped so far
     hand_frames: int = 0
     body_frames: int = 0
     seat_run: int = 0  # consecutive steps of pelvis-chair contact at any root height (SitStand's diagnosis)
@@ -73,6 +79,8 @@ class TaskMeter:
     def __post_init__(self):
         if self.task not in TASKS:
             raise ValueError(f"unknown task {self.task!r}; known: {TASKS}")
+        if self.task == "Carry" and self.track_end is None:
+            raise ValueError("a Carry meter needs the track's end (track_end)")
 
     def update(self, f: StepFacts) -> None:
         r = self.rules
@@ -103,7 +111,7 @@ class TaskMeter:
         """Push's hand-object contact rate (0 when body contact dominates or nothing was pushed)."""
         if not self.push_frames or self.body_frames > self.hand_frames:
             return 0.0
-        return self.hand_frames / self.push_frames
+        return self.hand_frames / max(self.push_total, self.push_frames)
 
     @property
     def success(self) -> bool:
@@ -118,7 +126,7 @@ class TaskMeter:
         placed = (
             f is not None
             and f.object_low < r.rest_m
-            and float(np.linalg.norm(f.object_pos - f.object_ref)) <= (r.carry_tolerance_m)
+            and float(np.linalg.norm(f.object_pos - self.track_end)) <= r.carry_tolerance_m
         )
         return self.picked and self.max_dev <= r.carry_tolerance_m and placed
 
