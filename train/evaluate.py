@@ -158,6 +158,7 @@ def plot(results: list[dict], path: Path) -> None:
         ax.set_ylim(-5, 105)
     axes[0].set_ylabel("%")
     axes[-1].legend(fontsize=7)
+    fig.tight_layout()
     save_figure(fig, path, dpi=100)
 
 
