@@ -115,6 +115,12 @@ def _save(data: WindowTensors, path: Path) -> None:
     write_bytes_atomic(path, buf.getvalue())
 
 
+def read_log(run_dir: str | Path) -> list[dict]:
+    """The finished iterations' rows of ``run_dir/dagger_log.jsonl`` (none if there is no log)."""
+    path = Path(run_dir) / "dagger_log.jsonl"
+    return [json.loads(line) for line in path.open()] if path.is_file() else []
+
+
 def dagger(
     policy: InteractionPolicy,
     dataset: WindowTensors,
@@ -128,7 +134,7 @@ def dagger(
     ``run_dir/policy.pt``."""
     run_dir = Path(run_dir)
     log_path, data_path = run_dir / "dagger_log.jsonl", run_dir / "dagger_data.pt"
-    done_rows = [json.loads(line) for line in log_path.open()] if log_path.is_file() else []
+    done_rows = read_log(run_dir)
     aggregated = None
     if done_rows and data_path.is_file():  # resume after the last finished iteration
         aggregated = WindowTensors(**torch.load(data_path, weights_only=True))

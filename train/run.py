@@ -24,7 +24,7 @@ from pipeline.errors import InputError
 from pipeline.stage.atomic import write_json_atomic
 from pipeline.stage.paths import stage_dir
 from train.bc import BCConfig, WindowTensors, train_bc
-from train.dagger import DAggerConfig, dagger
+from train.dagger import DAggerConfig, dagger, read_log
 from train.episodes import load_episodes
 from train.policy import PolicyConfig, load_policy, save_policy
 from train.vae import VAEConfig, split_episodes
@@ -98,8 +98,7 @@ def train(config: TrainConfig, run_dir: str | Path, *, overwrite: bool = False) 
     )
     valid = [episodes[i] for i in train_eps if episodes[i].simulated.validation.get("valid", False)]
     dagger(policy, data, valid, run_dir, dagger_config, bc, heldout)
-    rows = (run_dir / "dagger_log.jsonl").read_text().splitlines() if config.dagger_iterations else []
-    rows = [json.loads(r) for r in rows]
+    rows = read_log(run_dir)
     last = rows[-1] if rows else {}
     bc_seconds = json.loads((run_dir / "bc_report.json").read_text()).get("seconds", 0.0)
     report = {
