@@ -15,6 +15,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from lessmimic.train_commands import add_train
 from pipeline.errors import InputError
 from pipeline.stage.executor import EXECUTORS
 from pipeline.stage.state import up_to_date_line
@@ -181,69 +182,6 @@ def _cmd_features(a: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_train_bc(a: argparse.Namespace) -> int:
-    import torch
-
-    from train.run import TrainConfig, train
-
-    torch.set_num_threads(a.threads)
-    cfg = TrainConfig(
-        name=a.name,
-        backbone=a.backbone,
-        vae_steps=a.vae_steps,
-        bc_steps=a.bc_steps,
-        dagger_iterations=a.dagger_iterations,
-        dagger_episodes=a.dagger_episodes,
-        dagger_probe=a.dagger_probe,
-        dagger_fit_steps=a.dagger_fit_steps,
-        envs=a.envs,
-        seed=a.seed,
-        device=a.device,
-    )
-    report = train(cfg, Path(a.run), overwrite=a.overwrite)
-    scale, last = report["scale"], report["scale"].get("dagger_last", {})
-    rmse, success = last.get("action_rmse", float("nan")), last.get("success", float("nan"))
-    print(
-        f"trained {report['policy']} in {report['seconds'] / 60:.1f} min: {scale['corpus_episodes']} corpus episodes "
-        f"({scale['corpus_frames']} frames), BC {scale['bc_steps']} steps x {cfg.batch}, DAgger "
-        f"{scale['dagger_iterations']} iterations ({scale['dagger_windows']} windows); last on-policy action RMSE "
-        f"{rmse:.3f} rad, rollout success {success:.2f}"
-    )
-    return 0
-
-
-def _cmd_eval(a: argparse.Namespace) -> int:
-    import json
-
-    import torch
-
-    from pipeline.stage.paths import stage_dir
-    from train.actors import PolicyActor, TeacherActor
-    from train.episodes import load_episodes
-    from train.evaluate import EvalConfig, evaluate, markdown, write
-    from train.policy import dataset_layout, load_policy
-
-    torch.set_num_threads(a.threads)
-    episodes = load_episodes(a.name)
-    cfg = EvalConfig(seeds=tuple(int(s) for s in a.seeds.split(",")), episodes=a.episodes, envs=a.envs)
-    results, scale = [], {"corpus": a.name, "episodes_per_cell_and_seed": cfg.episodes, "seeds": list(cfg.seeds)}
-    if a.policy:
-        layout = dataset_layout(stage_dir(a.name, "features"))  # the corpus's links and actuator profile
-        policy = load_policy(a.policy, {"links": layout.links, "actuator_profile": layout.actuator_profile})
-        run = Path(a.policy).parent
-        report = json.loads((run / "report.json").read_text()) if (run / "report.json").is_file() else {}
-        scale["policy"] = {"checkpoint": str(a.policy), "training_scale": report.get("scale", "unknown")}
-        results.append(evaluate(PolicyActor(policy), episodes, cfg, f"policy ({Path(a.policy).parent.name})"))
-    if a.teacher:
-        results.append(evaluate(TeacherActor(), episodes, cfg, "QP teacher, 1.0x reference"))
-    if not results:
-        raise InputError(None, "--policy", "nothing to evaluate: pass --policy and/or --teacher")
-    out = Path(a.out) if a.out else (Path(a.policy).parent / "eval" if a.policy else Path("runs") / "eval")
-    print(write(results, out, scale))
-    print(markdown(results))
-    return 0
-
-
 def _cmd_inspect(a: argparse.Namespace) -> int:
     from pipeline.readers import read_clips, read_robot_clip
     from pipeline.stage.inspect_log import write_human_log, write_robot_log
@@ -391,44 +329,6 @@ def _add_residual(sub) -> None:
     p.set_defaults(func=_cmd_physicalize_residual)
 
 
-def _add_train(sub) -> None:
-    p = sub.add_parser(
-        "train-bc",
-        help="pre-train the interaction policy: the DF VAE, behaviour cloning on the corpus's features, DAgger from "
-        "the QP teacher (runs/<RUN>/)",
-    )
-    p.add_argument("--name", default="corpus", help="the corpus: datasets/<NAME>/ (default corpus: `make corpus`)")
-    p.add_argument("--run", default="runs/bc", help="the run folder (default runs/bc); a rerun resumes")
-    p.add_argument("--overwrite", action="store_true", help="start the run afresh")
-    p.add_argument("--backbone", choices=("transformer", "mlp"), default="transformer", help="policy backbone")
-    from train.run import TrainConfig  # the defaults: the laptop scale
-
-    d = TrainConfig()
-    p.add_argument("--vae-steps", type=int, default=d.vae_steps)
-    p.add_argument("--bc-steps", type=int, default=d.bc_steps, help=f"behaviour-cloning steps (batch {d.batch})")
-    p.add_argument("--dagger-iterations", type=int, default=d.dagger_iterations)
-    p.add_argument(
-        "--dagger-episodes", type=int, default=d.dagger_episodes, help="episodes per DAgger iteration (beta-mixture)"
-    )
-    p.add_argument("--dagger-probe", type=int, default=d.dagger_probe, help="student-only episodes per iteration")
-    p.add_argument("--dagger-fit-steps", type=int, default=d.dagger_fit_steps)
-    p.add_argument("--envs", type=int, default=d.envs, help="environments stepped together")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
-    p.add_argument("--threads", type=int, default=1, help="torch threads (1 is fastest on a loaded 2-core machine)")
-    p.set_defaults(func=_cmd_train_bc)
-    p = sub.add_parser("eval", help="the paper's Table 2 evaluation of a policy and/or the QP teacher baseline")
-    p.add_argument("--policy", default=None, help="a policy checkpoint (runs/<RUN>/policy.pt)")
-    p.add_argument("--teacher", action="store_true", help="also score the QP teacher tracking the 1.0x reference")
-    p.add_argument("--name", default="corpus", help="the corpus whose episodes are evaluated (default corpus)")
-    p.add_argument("--seeds", default="0,1,2", help="evaluation seeds (default 0,1,2)")
-    p.add_argument("--episodes", type=int, default=4, help="episodes per cell and seed (default 4)")
-    p.add_argument("--envs", type=int, default=8)
-    p.add_argument("--threads", type=int, default=1)
-    p.add_argument("--out", default=None, help="output folder (default: the policy's run folder /eval)")
-    p.set_defaults(func=_cmd_eval)
-
-
 def _add_tools(sub) -> None:
     p = sub.add_parser("inspect", help="write an MCAP inspection log (Foxglove) for a clip file")
     p.add_argument("file")
@@ -469,7 +369,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="lessmimic", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     sub = ap.add_subparsers(dest="command", required=True)
-    for add in (_add_retarget, _add_import, _add_physicalize, _add_residual, _add_features, _add_train, _add_tools):
+    for add in (_add_retarget, _add_import, _add_physicalize, _add_residual, _add_features, add_train, _add_tools):
         add(sub)
     return ap
 
