@@ -195,17 +195,20 @@ COUNTED = ("teacher_gains",)  # which gain set was kept: clips per set, not a me
 
 
 def summarise(per_clip: list[dict]) -> dict:
-    """Dataset-level summary: ``valid_frac``, ``clips``, the mean of each numeric figure over clips and,
-    for the :data:`COUNTED` ones, the number of clips per value (``clips_per_teacher_gains``: {"0": 3, "1": 1})."""
+    """Dataset-level summary: ``valid_frac``, ``clips``, the mean of each numeric figure over the clips that have it
+    (a figure that is None for a clip, as ``fell_at_s`` of a clip that did not fall, is left out of that mean, whichever
+    clip comes first) and, for the :data:`COUNTED` ones, the number of clips per value
+    (``clips_per_teacher_gains``: {"0": 3, "1": 1})."""
     if not per_clip:
         return {"valid_frac": 0.0, "clips": 0}
     out = {"valid_frac": float(np.mean([c["valid"] for c in per_clip])), "clips": len(per_clip)}
-    for k, v in per_clip[0].items():
-        if k in NOT_AVERAGED or isinstance(v, bool) or not isinstance(v, (int, float)):
+    keys = dict.fromkeys(k for c in per_clip for k in c)  # every clip's figures, in first-seen order
+    for k in keys:
+        values = [c[k] for c in per_clip if isinstance(c.get(k), (int, float)) and not isinstance(c.get(k), bool)]
+        if k in NOT_AVERAGED or not values:
             continue
         if k in COUNTED:
-            values = [c[k] for c in per_clip if k in c]
             out[f"clips_per_{k}"] = {str(x): values.count(x) for x in sorted(set(values))}
         else:
-            out[k] = float(np.mean([c.get(k, np.nan) for c in per_clip]))
+            out[k] = float(np.mean(values))
     return out

@@ -94,3 +94,16 @@ def test_summary_counts_gain_sets_and_averages_figures():
     assert s["clips"] == 3 and s["valid_frac"] == 2 / 3 and abs(s["mpjpe_m"] - 0.04) < 1e-12
     assert s["clips_per_teacher_gains"] == {"0": 2, "1": 1}
     assert "teacher_gains" not in s and "episode" not in s
+
+
+def test_summary_averages_a_figure_over_the_clips_that_have_it():
+    """Measured crash (8 synthetic SitStand clips, the first one fell): ``fell_at_s`` is a number for a clip that
+    fell and None for one that did not; the mean is over the clips that fell, whichever comes first."""
+    clips = [
+        {"episode": 0, "valid": False, "fell": True, "fell_at_s": 2.0},
+        {"episode": 1, "valid": True, "fell": False, "fell_at_s": None},
+        {"episode": 2, "valid": False, "fell": True, "fell_at_s": 4.0},
+    ]
+    s = summarise(clips)
+    assert s["fell_at_s"] == 3.0 and "fell" not in s and s["valid_frac"] == 1 / 3
+    assert summarise(clips[1:2]).get("fell_at_s") is None
