@@ -41,33 +41,28 @@ def _cmd_train_bc(a: argparse.Namespace) -> int:
 
 
 def _cmd_eval(a: argparse.Namespace) -> int:
-    import json
-
     import torch
 
     from pipeline.stage.paths import stage_dir
     from train.actors import PolicyActor, TeacherActor
     from train.episodes import load_episodes
-    from train.evaluate import EvalConfig, evaluate, markdown, write
+    from train.evaluate import EvalConfig, evaluate, markdown, scale_note, write
     from train.policy import dataset_layout, load_policy
 
     torch.set_num_threads(a.threads)
     episodes = load_episodes(a.name)
     cfg = EvalConfig(seeds=tuple(int(s) for s in a.seeds.split(",")), episodes=a.episodes, envs=a.envs)
-    results, scale = [], {"corpus": a.name, "episodes_per_cell_and_seed": cfg.episodes, "seeds": list(cfg.seeds)}
+    results = []
     if a.policy:
         layout = dataset_layout(stage_dir(a.name, "features"))  # the corpus's links and actuator profile
         policy = load_policy(a.policy, {"links": layout.links, "actuator_profile": layout.actuator_profile})
-        run = Path(a.policy).parent
-        report = json.loads((run / "report.json").read_text()) if (run / "report.json").is_file() else {}
-        scale["policy"] = {"checkpoint": str(a.policy), "training_scale": report.get("scale", "unknown")}
         results.append(evaluate(PolicyActor(policy), episodes, cfg, f"policy ({Path(a.policy).parent.name})"))
     if a.teacher:
         results.append(evaluate(TeacherActor(), episodes, cfg, "QP teacher, 1.0x reference"))
     if not results:
         raise InputError(None, "--policy", "nothing to evaluate: pass --policy and/or --teacher")
     out = Path(a.out) if a.out else (Path(a.policy).parent / "eval" if a.policy else Path("runs") / "eval")
-    print(write(results, out, scale))
+    print(write(results, out, scale_note(a.name, cfg, a.policy)))
     print(markdown(results))
     return 0
 

@@ -13,7 +13,7 @@ from retarget.stage import run_stage as retarget_stage
 from train.actors import TeacherActor
 from train.env import InteractionEnv
 from train.episodes import load_episodes, scaled_objects
-from train.evaluate import EvalConfig, evaluate, markdown, scale_line
+from train.evaluate import EvalConfig, evaluate, markdown, scale_line, scale_note
 from train.teacher import Teacher
 
 
@@ -102,7 +102,7 @@ def test_scaled_objects_rest_on_the_floor_and_the_command_does_not_change(corpus
         env.reset_one(0, corpus[0], 2.0)
 
 
-def test_the_evaluation_harness_scores_the_teacher(corpus):
+def test_the_evaluation_harness_scores_the_teacher(corpus, tmp_path):
     result = evaluate(TeacherActor(), corpus, EvalConfig(seeds=(0,), episodes=1, tasks=("PickUp", "Push")), "teacher")
     cells = result["cells"]
     assert set(cells) == {
@@ -118,8 +118,11 @@ def test_the_evaluation_harness_scores_the_teacher(corpus):
     assert cells["PickUp@1"]["mean"] == 1.0 and cells["Push@1"]["mean"] > 0.9
     row = markdown([result]).splitlines()[2].split(" | ")
     assert row[0] == "| teacher" and row[3] == "100.0 +- 0.0" and row[6:9] == ["-", "-", "-"]  # PickUp 1.0; no SitStand
-    note = {"corpus": "train", "episodes_per_cell_and_seed": 1, "seeds": [0], "policy": {"checkpoint": "p.pt"}}
+    note = scale_note("train", EvalConfig(seeds=(0,), episodes=1), tmp_path / "p.pt")  # no report.json beside it
+    assert note["policy"]["training_scale"] == "unknown"
     assert "1 episodes per cell and seed" in scale_line(note) and "trained on unknown" in scale_line(note)
+    (tmp_path / "report.json").write_text('{"scale": {"bc_steps": 7}}')
+    assert scale_note("train", EvalConfig(), tmp_path / "p.pt")["policy"]["training_scale"] == {"bc_steps": 7}
 
 
 def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):

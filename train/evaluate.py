@@ -117,6 +117,19 @@ def markdown(results: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def scale_note(corpus: str, cfg: EvalConfig, checkpoint: str | Path | None = None) -> dict:
+    """What an evaluation is worth: the corpus, episodes per cell and seed, the seeds and, for a policy checkpoint,
+    its training scale from the ``report.json`` of its run folder (``"unknown"`` without one)."""
+    import json
+
+    note = {"corpus": corpus, "episodes_per_cell_and_seed": cfg.episodes, "seeds": list(cfg.seeds)}
+    if checkpoint is not None:
+        report = Path(checkpoint).parent / "report.json"
+        scale = json.loads(report.read_text()).get("scale", "unknown") if report.is_file() else "unknown"
+        note["policy"] = {"checkpoint": str(checkpoint), "training_scale": scale}
+    return note
+
+
 def scale_line(note: dict) -> str:
     """What the table's numbers are worth, in one line: the corpus, episodes, seeds and the policy's training scale."""
     line = (
@@ -157,7 +170,7 @@ def plot(results: list[dict], path: Path) -> None:
         ax.set_xlabel("object scale")
         ax.set_ylim(-5, 105)
     axes[0].set_ylabel("%")
-    axes[-1].legend(fontsize=7)
+    fig.legend(*axes[0].get_legend_handles_labels(), fontsize=7, loc="lower right")
     fig.tight_layout()
     save_figure(fig, path, dpi=100)
 
