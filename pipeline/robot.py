@@ -243,6 +243,7 @@ def _lessmimic_demo_profile() -> ActuatorProfile:
 
 
 ACTUATOR_PROFILES: dict[str, ActuatorProfile] = {p.name: p for p in (_mjlab_profile(), _lessmimic_demo_profile())}
+DEFAULT_PROFILE = "mjlab"  # a dataset that names none was written under it
 
 
 def actuator_profile(name: str) -> ActuatorProfile:

@@ -53,6 +53,23 @@ def test_replayed_states_give_the_features_dataset_columns(corpus):
                 assert np.array_equal(getattr(obs, key)[0].astype(np.float32), cols[column][starts[e] + t])
 
 
+def test_the_episodes_actuator_profile_drives_the_environment_and_binds_the_policy(corpus):
+    """An episode physicalized under the demo's gains is simulated and taught with them (its actions are targets
+    for those gains); a policy trained for another profile refuses it (the DAgger test below)."""
+    from dataclasses import replace
+
+    from pipeline.robot import actuator_profile
+
+    assert {e.profile for e in corpus} == {"mjlab"}
+    env = InteractionEnv()
+    for name in ("mjlab", "lessmimic_demo"):
+        env.reset([(replace(corpus[0], profile=name), 1.0)])
+        np.testing.assert_allclose(env.slots[0].scene.model.actuator_gainprm[:29, 0], actuator_profile(name).kp)
+        teacher = TeacherActor()
+        teacher.reset(env)
+        np.testing.assert_allclose(teacher.teachers[0].controller.profile.kp, actuator_profile(name).kp)
+
+
 def test_stepping_is_deterministic_and_threads_change_nothing(corpus):
     rng = np.random.default_rng(0)
     actions = [corpus[0].simulated.action[t] + rng.normal(0, 0.05, 29) for t in range(30)]
@@ -131,6 +148,7 @@ def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):
     import json
     from dataclasses import replace
 
+    from train.actors import PolicyActor
     from train.bc import BCConfig, WindowTensors, train_bc
     from train.dagger import DAggerConfig, dagger
     from train.policy import PolicyConfig, load_policy
@@ -152,6 +170,10 @@ def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):
     rows = [json.loads(line) for line in (tmp_path / "dagger_log.jsonl").open()]
     assert [r["iteration"] for r in rows] == [0, 1] and rows[1]["beta"] == pytest.approx(0.5 * cfg.beta_decay)
     new = rows[1]["windows"] + rows[1]["student"]["windows"]
+    env = InteractionEnv()
+    env.reset([(replace(corpus[0], profile="lessmimic_demo"), 1.0)])
+    with pytest.raises(InputError, match="actuator_profile: episode physicalized under 'lessmimic_demo', the policy"):
+        PolicyActor(load_policy(tmp_path / "policy.pt")).reset(env)
     assert rows[1]["aggregated_windows"] == rows[0]["aggregated_windows"] + new
 
 

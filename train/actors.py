@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from pipeline.errors import InputError
 from train.env import InteractionEnv, Obs
 from train.teacher import Teacher, episode_reference
 
@@ -39,6 +40,14 @@ class PolicyActor:
         self.history = History(policy.config.history)
 
     def reset(self, env: InteractionEnv) -> None:
+        want = self.policy.layout.actuator_profile
+        for s in env.slots:
+            if s.episode.profile != want:
+                raise InputError(
+                    s.episode.simulated.robot.source,
+                    "actuator_profile",
+                    f"episode physicalized under {s.episode.profile!r}, the policy acts for {want!r}",
+                )
         self.history.reset(env.observe())
 
     def observe(self, obs: Obs) -> None:
@@ -54,11 +63,10 @@ class PolicyActor:
 
 
 class TeacherActor:
-    """The QP teacher of each environment's episode (its 1.0x feasible reference), bound to that environment's
-    (possibly scaled) model. References are built once per episode and reused."""
+    """The QP teacher of each environment's episode (its 1.0x feasible reference, under the episode's actuator
+    profile), bound to that environment's (possibly scaled) model. References are built once per episode and reused."""
 
-    def __init__(self, profile: str = "mjlab"):
-        self.profile = profile
+    def __init__(self):
         self.teachers: list[Teacher] = []
         self._refs: dict[int, object] = {}
 
@@ -67,8 +75,8 @@ class TeacherActor:
         for s in env.slots:
             key = id(s.episode)
             if key not in self._refs:
-                self._refs[key] = episode_reference(s.episode, self.profile)
-            self.teachers.append(Teacher(s.episode, s.scene.model, self.profile, ref=self._refs[key]))
+                self._refs[key] = episode_reference(s.episode)
+            self.teachers.append(Teacher(s.episode, s.scene.model, ref=self._refs[key]))
 
     def observe(self, obs: Obs) -> None:
         pass

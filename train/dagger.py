@@ -139,7 +139,7 @@ def dagger(
     if done_rows and data_path.is_file():  # resume after the last finished iteration
         aggregated = WindowTensors(**torch.load(data_path, weights_only=True))
         policy = load_policy(run_dir / f"policy_dagger{len(done_rows) - 1}.pt", device=_device(policy))
-    teacher = TeacherActor(policy.layout.actuator_profile)
+    teacher = TeacherActor()
     probe = probe_episodes(episodes, config.probe, config.seed)
     for it in tqdm(range(len(done_rows), config.iterations), desc="dagger", unit="iteration"):
         t0 = time.perf_counter()

@@ -43,11 +43,11 @@ from train.tasks import Rules, StepFacts, TaskMeter
 @dataclass(frozen=True)
 class EnvConfig:
     """``links``: the DF links (the features stage's); ``root_horizon_s``: how far ahead the root command looks;
-    ``profile``: the actuator profile; ``threads``: worker threads stepping the environments."""
+    ``threads``: worker threads stepping the environments. The actuator profile is each episode's
+    (:attr:`train.episodes.Episode.profile`)."""
 
     links: tuple[str, ...] = FeatureConfig().links
     root_horizon_s: float = FeatureConfig().root_horizon_s
-    profile: str = "mjlab"
     threads: int = 1
     rules: Rules = field(default_factory=Rules)
 
@@ -67,7 +67,7 @@ class _Slot:
         sim = episode.simulated
         self.objects = scaled_objects(sim.robot.objects, self.scale)
         self.scene: Scene = build_scene(
-            [SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in self.objects], cfg.profile
+            [SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in self.objects], episode.profile
         )
         m = self.scene.model
         self.data = mujoco.MjData(m)

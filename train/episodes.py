@@ -17,8 +17,10 @@ import numpy as np
 
 from pipeline.clip import ObjectTrack, PhysicalizedClip, RobotClip
 from pipeline.dataset.clips import episodes_to_physicalized_clips, episodes_to_robot_clips
+from pipeline.dataset.read import dataset_actuator_profile
 from pipeline.errors import InputError
 from pipeline.geometry import Primitive
+from pipeline.robot import DEFAULT_PROFILE
 from pipeline.stage.paths import stage_dir
 
 TASKS = ("PickUp", "SitStand", "Push", "Carry")
@@ -26,11 +28,13 @@ TASKS = ("PickUp", "SitStand", "Push", "Carry")
 
 @dataclass(frozen=True)
 class Episode:
-    """One training/evaluation episode source: the simulated clip and its retargeted reference."""
+    """One training/evaluation episode source: the simulated clip, its retargeted reference and the actuator
+    profile the clip was physicalized under (the environment's and the teacher's: its actions are for those gains)."""
 
     task: str
     simulated: PhysicalizedClip
     reference: RobotClip
+    profile: str = DEFAULT_PROFILE
 
     @property
     def frames(self) -> int:
@@ -52,13 +56,14 @@ def load_episodes(name: str, tasks: tuple[str, ...] = TASKS, *, valid_only: bool
         if not (root / "meta" / "info.json").is_file():
             raise InputError(root, "meta/info.json", f"no dataset here: run `lessmimic {stage} --name {name}` first")
     references = {c.source: c for c in episodes_to_robot_clips(ref_root)}
+    profile = dataset_actuator_profile(sim_root)
     out = []
     for clip in episodes_to_physicalized_clips(sim_root):
         if clip.robot.task not in tasks or (valid_only and not clip.validation.get("valid", False)):
             continue
         if clip.robot.source not in references:
             raise InputError(ref_root, "source", f"{clip.robot.source!r} has no retargeted clip to teach from")
-        out.append(Episode(clip.robot.task, clip, references[clip.robot.source]))
+        out.append(Episode(clip.robot.task, clip, references[clip.robot.source], profile))
     if not out:
         raise InputError(sim_root, "episodes", f"no valid episode of {', '.join(tasks)} in this dataset")
     return out

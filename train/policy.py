@@ -29,8 +29,9 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from pipeline.dataset.read import read_card, read_episode_meta
+from pipeline.dataset.read import dataset_actuator_profile
 from pipeline.errors import InputError
+from pipeline.robot import DEFAULT_PROFILE
 from pipeline.stage.atomic import write_bytes_atomic
 from train.normalize import MIN_STD, Normalizer
 from train.vae import DF_COLUMN, DFVAE, df_links, mlp, require_columns
@@ -38,7 +39,6 @@ from train.vae import DF_COLUMN, DFVAE, df_links, mlp, require_columns
 PROPRIO_COLUMN, ROOT_COMMAND_COLUMN, ACTION_COLUMN = "observation.proprio", "observation.root_command", "action"
 COLUMNS = (PROPRIO_COLUMN, ROOT_COMMAND_COLUMN, DF_COLUMN, ACTION_COLUMN)
 POLICY_FORMAT = "lessmimic.interaction_policy/1"
-DEFAULT_PROFILE = "mjlab"
 
 
 @dataclass(frozen=True)
@@ -101,19 +101,6 @@ class PolicyLayout:
             if (list(b) if isinstance(b, (list, tuple)) else b) != a:
                 return f"layout.{f.name}", f"checkpoint has {a!r}, expected {b!r}"
         return None
-
-
-def dataset_actuator_profile(root: str | Path) -> str:
-    """The actuator profile of a features dataset: its card's (``"<name>: <description>"``), else the episodes'
-    physicalize provenance, else ``"mjlab"``."""
-    card = read_card(root)
-    if card is not None and card.actuator_profile:
-        return card.actuator_profile.split(":", 1)[0].strip()
-    for meta in read_episode_meta(root):
-        for d in (meta, meta.get("provenance") or {}):
-            if isinstance(d, dict) and d.get("actuator_profile"):
-                return str(d["actuator_profile"])
-    return DEFAULT_PROFILE
 
 
 def dataset_layout(root: str | Path, history: int = 5) -> PolicyLayout:

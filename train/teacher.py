@@ -23,20 +23,21 @@ from pipeline.robot import actuator_profile
 from train.episodes import Episode
 
 
-def episode_reference(episode: Episode, profile: str = "mjlab") -> Reference:
-    """The feasible reference the physicalize teacher tracked for this episode (its retargeted clip, scale 1)."""
-    _, ref, _, _ = tracking_problem(episode.reference, profile)
+def episode_reference(episode: Episode) -> Reference:
+    """The feasible reference the physicalize teacher tracked for this episode (its retargeted clip, scale 1, under
+    the episode's actuator profile)."""
+    _, ref, _, _ = tracking_problem(episode.reference, episode.profile)
     return ref
 
 
 class Teacher:
     """Joint targets of the QP teacher for an episode, on ``model`` (module docstring)."""
 
-    def __init__(self, episode: Episode, model: mujoco.MjModel, profile: str = "mjlab", ref: Reference | None = None):
-        self.ref = ref if ref is not None else episode_reference(episode, profile)
+    def __init__(self, episode: Episode, model: mujoco.MjModel, ref: Reference | None = None):
+        self.ref = ref if ref is not None else episode_reference(episode)
         gains = TEACHER_GAINS[int(episode.simulated.robot.provenance.get("teacher_gains", 0))]
         self.model = model
-        self.controller = WholeBodyController(model, actuator_profile(profile), gains)
+        self.controller = WholeBodyController(model, actuator_profile(episode.profile), gains)
         self._data = mujoco.MjData(model)
 
     def act(self, data: mujoco.MjData, t: int) -> np.ndarray:

@@ -18,6 +18,7 @@ import pyarrow.parquet as pq
 from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.schema import INDEX_COLUMNS, SIDECAR_DATASET, SIDECAR_EPISODES, Episode, Feature
 from pipeline.errors import InputError
+from pipeline.robot import DEFAULT_PROFILE
 
 
 def read_info(root: str | Path) -> dict:
@@ -117,3 +118,16 @@ def iter_episodes(root: str | Path) -> Iterator[Episode]:
     for e, (a, b) in enumerate(zip(starts, ends)):
         meta = {k: v for k, v in metas.get(e, {}).items() if k not in ("episode_index", "task", "length")}
         yield Episode(tasks[e], {f.name: cols[f.name][a:b] for f in features}, meta)
+
+
+def dataset_actuator_profile(root: str | Path) -> str:
+    """The actuator profile a dataset's actions are for (physicalized or features): its card's
+    (``"<name>: <description>"``), else the episodes' physicalize provenance, else :data:`DEFAULT_PROFILE`."""
+    card = read_card(root)
+    if card is not None and card.actuator_profile:
+        return card.actuator_profile.split(":", 1)[0].strip()
+    for meta in read_episode_meta(root):
+        for d in (meta, meta.get("provenance") or {}):
+            if isinstance(d, dict) and d.get("actuator_profile"):
+                return str(d["actuator_profile"])
+    return DEFAULT_PROFILE
