@@ -42,8 +42,9 @@ import: install
 		$(if $(OBJECT_MESH),--object-mesh $(OBJECT_MESH)) $(if $(OBJECT_MASS),--object-mass $(OBJECT_MASS))
 
 TEACHER ?= base
+PROFILE ?= mjlab
 physicalize: install
-	$(CLI) physicalize $(STAGE_ARGS) $(RUN_ARGS) --teacher $(TEACHER) $(if $(KEEP_INVALID),--keep-invalid)
+	$(CLI) physicalize $(STAGE_ARGS) $(RUN_ARGS) --teacher $(TEACHER) --profile $(PROFILE) $(if $(KEEP_INVALID),--keep-invalid)
 
 # Smoke scale (CPU, ~1-2 min): a residual on one retargeted clip; then `make physicalize TEACHER=base+residual:$(CKPT)`.
 EPISODE ?= 0
@@ -60,14 +61,15 @@ features: install
 # A synthetic training corpus: retarget, physicalize, features on INPUT=synthetic:$(SEEDS) into datasets/$(CORPUS)/.
 # SEEDS: a range A-B, a seed, or a comma list, optionally :Task,Task (e.g. 0-24:PickUp,Push); every seed gives the
 # four synthetic tasks with the objects moved a few cm. CPU cost (SEEDS=0-24 = 100 clips, JOBS=2 on 2 cores, ~9 min):
-# retarget ~2 min, physicalize ~7 min (93 clips valid), features ~20 s. Resumable like every stage (rerun the same
-# command after an interruption); another SEEDS over an existing corpus needs OVERWRITE=1.
+# retarget ~2 min, physicalize ~7 min (91 clips valid), features ~20 s. Resumable like every stage (rerun the same
+# command after an interruption); another SEEDS over an existing corpus needs OVERWRITE=1. PROFILE=lessmimic_demo
+# physicalizes under the released demo's stiffer gains (81 clips valid; the policy trained on it acts for those gains).
 CORPUS ?= corpus
 SEEDS ?= 0-24
 CORPUS_ARGS = --name $(CORPUS) $(if $(OVERWRITE),--overwrite) $(RUN_ARGS)
 corpus: install
 	$(CLI) retarget $(CORPUS_ARGS) --input synthetic:$(SEEDS)
-	$(CLI) physicalize $(CORPUS_ARGS) --teacher $(TEACHER) $(if $(KEEP_INVALID),--keep-invalid)
+	$(CLI) physicalize $(CORPUS_ARGS) --teacher $(TEACHER) --profile $(PROFILE) $(if $(KEEP_INVALID),--keep-invalid)
 	$(CLI) features $(CORPUS_ARGS)
 
 # Train I (paper Sec. III-B): the DF VAE, behaviour cloning on the corpus, DAgger from the QP teacher, into runs/$(RUN)/.
