@@ -138,8 +138,13 @@ def test_the_evaluation_harness_scores_the_teacher(corpus, tmp_path):
     note = scale_note("train", EvalConfig(seeds=(0,), episodes=1), tmp_path / "p.pt")  # no report.json beside it
     assert note["policy"]["training_scale"] == "unknown"
     assert "1 episodes per cell and seed" in scale_line(note) and "trained on unknown" in scale_line(note)
-    (tmp_path / "report.json").write_text('{"scale": {"bc_steps": 7}}')
-    assert scale_note("train", EvalConfig(), tmp_path / "p.pt")["policy"]["training_scale"] == {"bc_steps": 7}
+    (tmp_path / "report.json").write_text('{"scale": {"bc_steps": 7, "dagger_iterations": 3}}')
+    assert scale_note("train", EvalConfig(), tmp_path / "p.pt")["policy"]["training_scale"]["dagger_iterations"] == 3
+    (tmp_path / "dagger_log.jsonl").write_text('{"iteration": 0, "aggregated_windows": 11}\n' * 3)
+    early = scale_note("train", EvalConfig(), tmp_path / "policy_dagger0.pt")["policy"]["training_scale"]
+    assert early["dagger_iterations"] == 1 and early["dagger_windows"] == 11 and early["bc_steps"] == 7
+    bc = scale_note("train", EvalConfig(), tmp_path / "policy_bc.pt")["policy"]["training_scale"]
+    assert bc["dagger_iterations"] == 0 and bc["dagger_windows"] == 0
 
 
 def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):

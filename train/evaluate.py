@@ -12,6 +12,8 @@ was scored (checkpoint and its training figures), so a CPU smoke number is never
 
 from __future__ import annotations
 
+import json
+import re
 import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -22,6 +24,7 @@ from tqdm import tqdm
 from pipeline.robot import JOINTS_QPOS
 from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
 from pipeline.stage.figure import save_figure
+from train.dagger import read_log
 from train.env import EnvConfig, InteractionEnv
 from train.episodes import TASKS, Episode
 from train.tasks import Rules
@@ -119,13 +122,21 @@ def markdown(results: list[dict]) -> str:
 
 def scale_note(corpus: str, cfg: EvalConfig, checkpoint: str | Path | None = None) -> dict:
     """What an evaluation is worth: the corpus, episodes per cell and seed, the seeds and, for a policy checkpoint,
-    its training scale from the ``report.json`` of its run folder (``"unknown"`` without one)."""
-    import json
-
+    its training scale from the ``report.json`` of its run folder (``"unknown"`` without one). An intermediate
+    checkpoint of the run (``policy_bc.pt``, ``policy_dagger<i>.pt``) gets its own DAgger iterations and windows from
+    the run's DAgger log, not the finished run's."""
     note = {"corpus": corpus, "episodes_per_cell_and_seed": cfg.episodes, "seeds": list(cfg.seeds)}
     if checkpoint is not None:
-        report = Path(checkpoint).parent / "report.json"
+        checkpoint = Path(checkpoint)
+        report = checkpoint.parent / "report.json"
         scale = json.loads(report.read_text()).get("scale", "unknown") if report.is_file() else "unknown"
+        step = re.fullmatch(r"policy_(bc|dagger(\d+))\.pt", checkpoint.name)
+        if isinstance(scale, dict) and step:
+            rows = read_log(checkpoint.parent)
+            i = -1 if step.group(1) == "bc" else int(step.group(2))
+            last = rows[i] if 0 <= i < len(rows) else {}
+            scale = {**scale, "dagger_iterations": i + 1, "dagger_windows": last.get("aggregated_windows", 0)}
+            scale["dagger_last"] = last
         note["policy"] = {"checkpoint": str(checkpoint), "training_scale": scale}
     return note
 
