@@ -135,8 +135,12 @@ def scale_note(corpus: str, cfg: EvalConfig, checkpoint: str | Path | None = Non
             rows = read_log(checkpoint.parent)
             i = -1 if step.group(1) == "bc" else int(step.group(2))
             last = rows[i] if 0 <= i < len(rows) else {}
-            scale = {**scale, "dagger_iterations": i + 1, "dagger_windows": last.get("aggregated_windows", 0)}
-            scale["dagger_last"] = last
+            scale = {
+                **scale,
+                "dagger_iterations": i + 1,
+                "dagger_windows": last.get("aggregated_windows", 0),
+                "dagger_last": last,
+            }
         note["policy"] = {"checkpoint": str(checkpoint), "training_scale": scale}
     return note
 
@@ -181,7 +185,8 @@ def plot(results: list[dict], path: Path) -> None:
         ax.set_xlabel("object scale")
         ax.set_ylim(-5, 105)
     axes[0].set_ylabel("%")
-    fig.legend(*axes[0].get_legend_handles_labels(), fontsize=7, loc="lower right")
+    lines = {label: h for ax in axes for h, label in zip(*ax.get_legend_handles_labels())}  # a task may lack a row
+    fig.legend(list(lines.values()), list(lines), fontsize=7, loc="lower right")
     fig.tight_layout()
     save_figure(fig, path, dpi=100)
 
