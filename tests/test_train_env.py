@@ -169,6 +169,7 @@ def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):
     assert row["beta"] == 0.5 and row["windows"] > 20 and student["windows"] > 0
     assert row["aggregated_windows"] == row["windows"] + student["windows"]
     assert row["action_rmse"] > 0 and 0 <= row["success"] <= 1 and row["fit"]["step"] == 20 and row["seconds"] > 0
+    assert set(row["task_weights"].values()) == {0.25} and sum(n for _, n in row["tasks"].values()) == 2
     dagger(load_policy(tmp_path / "policy.pt"), data, corpus, tmp_path, cfg, BCConfig(log_every=10))  # resumed: done
     assert len((tmp_path / "dagger_log.jsonl").read_text().splitlines()) == 1
     dagger(load_policy(tmp_path / "policy.pt"), data, corpus, tmp_path, replace(cfg, iterations=2), BCConfig())
@@ -180,6 +181,20 @@ def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):
     with pytest.raises(InputError, match="actuator_profile: episode physicalized under 'lessmimic_demo', the policy"):
         PolicyActor(load_policy(tmp_path / "policy.pt")).reset(env)
     assert rows[1]["aggregated_windows"] == rows[0]["aggregated_windows"] + new
+
+
+def test_dagger_draws_more_of_the_tasks_the_student_fails(corpus):
+    """The next iteration's task weights follow the last one's failures (mixture and probe together), never below
+    the floor; the draw keeps to them and cycles through a task's episodes."""
+    from train.dagger import draw_episodes, task_weights
+
+    tasks = ["Carry", "PickUp", "Push", "SitStand"]
+    row = {"tasks": {"PickUp": [3, 4], "SitStand": [0, 3]}, "student": {"tasks": {"SitStand": [0, 1], "Push": [2, 2]}}}
+    w = task_weights(tasks, row, floor=0.25)  # Carry not rolled out: 1; PickUp 1 - 3/4; Push floor; SitStand 1
+    np.testing.assert_allclose(w, np.array([1.0, 0.25, 0.25, 1.0]) / 2.5)
+    np.testing.assert_allclose(task_weights(tasks, None, 0.25), 0.25)
+    only_sit = draw_episodes(corpus, 3, np.array([0.0, 0.0, 0.0, 1.0]), tasks, np.random.default_rng(0))
+    assert [e.task for e in only_sit] == ["SitStand"] * 3 and only_sit[0] is only_sit[1]  # one SitStand episode
 
 
 def test_train_and_eval_commands_refuse_bad_input_with_one_line(corpus, tmp_path, capsys):

@@ -2,7 +2,8 @@
 environment, the QP teacher labels every state it visits, the labelled windows join the data, the student is
 refitted. Read top to bottom:
 
-1. iteration ``i`` runs :attr:`DAggerConfig.episodes` training episodes at scale 1.0 in ``envs`` environments; at
+1. iteration ``i`` runs :attr:`DAggerConfig.episodes` training episodes at scale 1.0 in ``envs`` environments,
+   drawn task by task with weights that follow the last iteration's failures (:func:`task_weights`); at
    every step each environment executes the teacher's targets with probability ``beta_i = beta0 * decay^i`` and
    the student's otherwise (the beta-mixture of DAgger's policy ``pi_i = beta_i pi* + (1 - beta_i) pi_hat_i``),
    and records the student's observation window with the teacher's targets for that state as its label; then the
@@ -52,6 +53,7 @@ class DAggerConfig:
     beta0: float = 0.5
     beta_decay: float = 0.85
     fit_steps: int = 2000
+    task_floor: float = 0.25  # the least weight of a task the student already succeeds at (:func:`task_weights`)
     seed: int = 0
 
 
@@ -62,6 +64,7 @@ def collect(
     the teacher, and the iteration's figures."""
     windows = {k: [] for k in ("proprio", "root_command", "df", "action")}
     sq_err, count, lengths, falls, success = 0.0, 0, [], 0, []
+    tasks: dict[str, list[int]] = {}  # task -> [successes, episodes]
     for k in range(0, len(episodes), envs):
         env = InteractionEnv(EnvConfig())
         env.reset([(e, 1.0) for e in episodes[k : k + envs]])
@@ -83,6 +86,10 @@ def collect(
         lengths += [s.t for s in env.slots]
         falls += sum(s.fell for s in env.slots)
         success += [m.success for m in env.meters()]
+        for e, m in zip(episodes[k : k + envs], env.meters()):
+            tally = tasks.setdefault(e.task, [0, 0])
+            tally[0] += int(m.success)
+            tally[1] += 1
     tensors = {k: torch.as_tensor(np.concatenate(v), dtype=torch.float32) for k, v in windows.items()}
     data = WindowTensors.from_windows(tensors["proprio"], tensors["root_command"], tensors["df"], tensors["action"])
     figures = {
@@ -90,6 +97,7 @@ def collect(
         "episode_length": float(np.mean(lengths)),
         "falls": int(falls),
         "success": float(np.mean(success)),
+        "tasks": tasks,
         "windows": len(data),
     }
     return data, figures
@@ -103,6 +111,34 @@ def probe_episodes(episodes: list[Episode], count: int, seed: int) -> list[Episo
         by_task.setdefault(episodes[i].task, []).append(episodes[i])
     queues = list(by_task.values())
     return [queues[k % len(queues)][(k // len(queues)) % len(queues[k % len(queues)])] for k in range(count)]
+
+
+def task_weights(tasks: list[str], row: dict | None, floor: float) -> np.ndarray:
+    """The probability of drawing each of ``tasks`` in the next iteration: ``w_k = max(1 - s_k, floor)``,
+    normalised, with ``s_k`` task k's success over the last iteration's rollouts (the mixture's and the probe's,
+    ``row``); equal for a task not rolled out yet and at the first iteration (``row`` None)."""
+    counts: dict[str, list[int]] = {}
+    for tally in [row.get("tasks", {}), row.get("student", {}).get("tasks", {})] if row else []:
+        for task, (won, n) in tally.items():
+            counts.setdefault(task, [0, 0])
+            counts[task][0] += won
+            counts[task][1] += n
+    w = np.array([max(1.0 - counts[t][0] / counts[t][1], floor) if t in counts else 1.0 for t in tasks])
+    return w / w.sum()
+
+
+def draw_episodes(episodes: list[Episode], count: int, weights: np.ndarray, tasks: list[str], rng) -> list[Episode]:
+    """``count`` episodes: each a task drawn with ``weights``, then that task's episodes in a shuffled cycle."""
+    by_task = {t: [e for e in episodes if e.task == t] for t in tasks}
+    cycles = {t: [by_task[t][i] for i in rng.permutation(len(by_task[t]))] for t in tasks}
+    picks = rng.choice(len(tasks), size=count, p=weights)
+    seen = dict.fromkeys(tasks, 0)
+    chosen = []
+    for k in picks:
+        task = tasks[k]
+        chosen.append(cycles[task][seen[task] % len(cycles[task])])
+        seen[task] += 1
+    return chosen
 
 
 def _device(policy: InteractionPolicy) -> torch.device:
@@ -141,11 +177,12 @@ def dagger(
         policy = load_policy(run_dir / f"policy_dagger{len(done_rows) - 1}.pt", device=_device(policy))
     teacher = TeacherActor()
     probe = probe_episodes(episodes, config.probe, config.seed)
+    tasks = sorted({e.task for e in episodes})
     for it in tqdm(range(len(done_rows), config.iterations), desc="dagger", unit="iteration"):
         t0 = time.perf_counter()
         rng = np.random.default_rng([config.seed, it])
-        order = rng.permutation(len(episodes))
-        chosen = [episodes[i] for i in np.resize(order, config.episodes)]
+        weights = task_weights(tasks, done_rows[-1] if done_rows else None, config.task_floor)
+        chosen = draw_episodes(episodes, config.episodes, weights, tasks, rng)
         beta = config.beta0 * config.beta_decay**it
         new, figures = collect(policy, teacher, chosen, beta, rng, config.envs)
         parts = [new]
@@ -164,6 +201,7 @@ def dagger(
         row = {
             "iteration": it,
             "beta": beta,
+            "task_weights": dict(zip(tasks, weights.round(4).tolist())),
             **figures,
             "aggregated_windows": len(aggregated),
             "fit": history[-1] if history else {},
@@ -173,5 +211,6 @@ def dagger(
         _save(aggregated, data_path)
         with log_path.open("a", encoding="utf-8") as f:  # last: the row marks a finished iteration
             f.write(json.dumps(row) + "\n")
+        done_rows.append(row)
     save_policy(policy, run_dir / "policy.pt", dagger_config=asdict(config))
     return policy
