@@ -129,7 +129,8 @@ class _Slot:
         sim = self.episode.simulated
         k = min(self.t, sim.frames - 1)
         self.fell = fallen(d, sim.robot.qpos[k, 2], self.torso, self.ref_torso_quat[k])
-        self.meter.update(self.facts(k))
+        self.last_facts = self.facts(k)
+        self.meter.update(self.last_facts)
         self.done = self.fell or self.t >= sim.frames - 1
 
     def facts(self, k: int) -> StepFacts:

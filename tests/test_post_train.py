@@ -1,0 +1,106 @@
+"""Post-training (PPO + AIP + AMP through rsl_rl) at smoke scale on the default corpus: real retarget ->
+physicalize -> features datasets, a BC policy trained for a few steps, real MuJoCo."""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from features.stage import run_stage as features_stage
+from physicalize.stage import run_stage as physicalize_stage
+from pipeline.errors import InputError
+from pipeline.stage.paths import stage_dir
+from retarget.stage import run_stage as retarget_stage
+from train.aip import PostTrainConfig, post_train, reference_buffers
+from train.bc import BCConfig, train_bc
+from train.episodes import load_episodes
+from train.policy import PolicyConfig, load_policy
+from train.post_env import AMP_STATE, PostEnvConfig, PostTrainEnv
+from train.rl_model import InteractionActor
+from train.vae import VAEConfig
+
+
+@pytest.fixture(scope="module")
+def bc_policy(tmp_path_factory):
+    """The default chain (4 synthetic clips) in a temporary datasets root, and a BC policy trained on it briefly."""
+    root = tmp_path_factory.mktemp("datasets")
+    run = tmp_path_factory.mktemp("run")
+    mp = pytest.MonkeyPatch()
+    mp.setenv("LESSMIMIC_DATASETS", str(root))
+    retarget_stage(None, "train")
+    physicalize_stage("train")
+    features_stage("train")
+    train_bc(stage_dir("train", "features"), run, BCConfig(steps=30, log_every=10), PolicyConfig(), VAEConfig(),
+             vae_steps=30)  # fmt: skip
+    yield run / "policy.pt"
+    mp.undo()
+
+
+SMOKE = PostTrainConfig(iterations=1, steps_per_env=6, env=PostEnvConfig(envs=2), disc_steps=2, disc_batch=16)
+
+
+def test_the_actor_starts_as_the_bc_policy_and_is_plugged_by_name(bc_policy):
+    """rsl_rl resolves the actor by its class name; its mean action is the BC policy's on the same windows."""
+    from rsl_rl.utils import resolve_callable
+
+    env = PostTrainEnv(load_episodes("train"), 5, PostEnvConfig(envs=2))
+    obs = env.get_observations()
+    cls = resolve_callable("train.rl_model:InteractionActor")
+    actor = cls(obs, {"actor": ["policy"]}, "actor", 29, str(bc_policy))
+    assert cls is InteractionActor
+    policy = load_policy(bc_policy)
+    h = {k: torch.as_tensor(v, dtype=torch.float32) for k, v in env.history.terms.items()}
+    with torch.no_grad():
+        mean = actor(obs)
+        sample = actor(obs, stochastic_output=True)
+    torch.testing.assert_close(mean, policy.act(h["proprio"], h["root_command"], h["df"]), rtol=0, atol=1e-6)
+    assert 0 < float((sample - mean).abs().mean()) < 0.2  # init_std 0.05 rad
+    with pytest.raises(ValueError, match="the policy reads"):
+        cls(obs, {"actor": ["critic"]}, "actor", 29, str(bc_policy))
+
+
+def test_the_environment_restarts_episodes_and_hands_the_priors_their_inputs(bc_policy):
+    env = PostTrainEnv(load_episodes("train"), 5, PostEnvConfig(envs=2, seed=3))
+    scales = [s.scale for s in env.env.slots]
+    assert all(0.4 <= v <= 1.6 for s in scales for v in s) and len({tuple(s) for s in scales}) == 2
+    hold = torch.as_tensor(np.stack([s.data.qpos[7:36] for s in env.env.slots]), dtype=torch.float32)
+    before = env.history.terms["proprio"][:, -1, AMP_STATE].copy()
+    obs, reward, done, extras = env.step(hold)
+    transition = extras["style"]["transition"].numpy()
+    np.testing.assert_allclose(transition[:, :64], before, atol=1e-6)
+    np.testing.assert_allclose(transition[:, 64:], env.history.terms["proprio"][:, -1, AMP_STATE], atol=1e-5)
+    assert obs["policy"].shape == (2, 5 * (93 + 12 + env.history.terms["df"].shape[-1]))
+    assert reward.shape == (2,) and torch.isfinite(reward).all() and not done.any()
+    assert extras["log"]["/reward/termination"] == 0.0 and extras["log"]["/reward/action_rate"] > 0
+    env.env.slots[0].done = True  # an episode that ends is restarted at once with a new draw
+    first = env.env.slots[0]
+    env.step(hold)
+    assert env.env.slots[0] is not first and env.episode_length_buf[0] == 0
+
+
+def test_one_ppo_iteration_from_a_bc_checkpoint_trains_the_policy_and_both_priors(bc_policy, tmp_path):
+    refs = reference_buffers("train", load_policy(bc_policy).vae)
+    assert refs["aip"].shape[1] == 64 and refs["amp"].shape[1] == 128 and len(refs["amp"]) < len(refs["aip"])
+    row = post_train("train", bc_policy, tmp_path, SMOKE)
+    assert row["iteration"] == 0 and row["env_steps"] == 12 and row["seconds"] > 0
+    for prior in ("aip", "amp"):
+        assert 0 <= row[f"{prior}_reward"] <= 1 and row[f"{prior}_lsgan"] > 0 and row[f"{prior}_grad_penalty"] >= 0
+    assert np.isfinite(row["value"]) and np.isfinite(row["surrogate"])
+    before, after = load_policy(bc_policy), load_policy(tmp_path / "policy.pt")
+    moved = [not torch.equal(a, b) for a, b in zip(before.backbone.parameters(), after.backbone.parameters())]
+    assert any(moved)
+    for a, b in zip(before.vae.parameters(), after.vae.parameters()):
+        assert torch.equal(a, b)  # the VAE stays frozen
+    post_train("train", bc_policy, tmp_path, SMOKE)  # resumed: nothing left to do
+    post_train("train", bc_policy, tmp_path, replace(SMOKE, iterations=2))
+    rows = [json.loads(line) for line in (tmp_path / "post_log.jsonl").open()]
+    assert [r["iteration"] for r in rows] == [0, 1]
+
+
+def test_ablations_drop_what_they_name_and_unknown_ones_are_refused(bc_policy, tmp_path):
+    row = post_train("train", bc_policy, tmp_path, replace(SMOKE, ablation="-AIP"))
+    assert "aip_reward" not in row and "amp_reward" in row
+    with pytest.raises(InputError, match="ablation: unknown ablation '-Foo'; known: -AIP, -Rand"):
+        PostTrainConfig(ablation="-Foo")

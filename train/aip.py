@@ -1,0 +1,232 @@
+"""Discriminative post-training (paper Sec. III-C, App. B): PPO from the BC + DAgger policy with two LSGAN style
+priors. Read top to bottom:
+
+1. :class:`AdversarialPPO` is rsl_rl's PPO plus the priors. After every environment step it adds the style rewards
+   to the task reward, ``r = r_task + w_int r_interact + w_mot r_style`` with ``r = max(0, 1 - 0.25 (D - 1)^2)``:
+   the **AIP** discriminator reads the interaction latent ``z = VAE.encode(u_t)`` of the state reached, the **AMP**
+   discriminator the robot's state transition (:data:`train.post_env.AMP_STATE`). After PPO's own update it trains
+   each discriminator (:mod:`train.discriminator`, Eq. 4 with a gradient penalty) on the iteration's policy
+   samples against its reference buffer, at the paper's 2e-4;
+2. :func:`reference_buffers`: ``B_ref`` of the AIP is the VAE latents of every frame of the valid episodes of the
+   features dataset (the pre-training data); the AMP's is their consecutive-frame transitions;
+3. :func:`post_train` builds the restarting environment (:class:`train.post_env.PostTrainEnv`, object scale drawn
+   per axis in 0.4-1.6), the actor (:class:`train.rl_model.InteractionActor`, initialised from ``policy.pt``),
+   an MLP critic (rsl_rl's, normalised inputs), and runs ``iterations`` of: ``steps_per_env`` steps of
+   rollout, returns (GAE), PPO update, discriminator update; a row of ``post_log.jsonl`` per iteration, and
+   ``policy.pt`` (an interaction-policy checkpoint that ``lessmimic eval`` scores like any other) after each.
+
+Ablations: ``-AIP`` drops the interaction prior, ``-Rand`` keeps the object at scale 1.0.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+from rsl_rl.algorithms import PPO
+from rsl_rl.models import MLPModel
+from rsl_rl.storage import RolloutStorage
+from tqdm import tqdm
+
+from pipeline.dataset.read import episode_ranges, read_columns
+from pipeline.errors import InputError
+from pipeline.stage.atomic import write_bytes_atomic
+from pipeline.stage.paths import stage_dir
+from train.discriminator import Discriminator, DiscriminatorConfig
+from train.episodes import load_episodes
+from train.policy import PROPRIO_COLUMN, load_policy, save_policy
+from train.post_env import AMP_STATE, PostEnvConfig, PostTrainEnv
+from train.rewards import RewardWeights, lsgan_reward
+from train.rl_model import InteractionActor
+from train.vae import DF_COLUMN, DFVAE
+
+ABLATIONS = ("-AIP", "-Rand")
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """rsl_rl PPO's settings; ``learning_rate``, ``gamma`` and ``entropy_coef`` are the paper's."""
+
+    learning_rate: float = 1e-3
+    gamma: float = 0.99
+    lam: float = 0.95
+    entropy_coef: float = 5e-4
+    clip_param: float = 0.2
+    num_learning_epochs: int = 5
+    num_mini_batches: int = 4
+    desired_kl: float = 0.01
+    max_grad_norm: float = 1.0
+
+
+@dataclass(frozen=True)
+class PostTrainConfig:
+    """``iterations`` of ``steps_per_env`` steps in ``env.envs`` environments; ``init_std`` the actor's exploration
+    noise (rad); ``disc_steps`` discriminator minibatches of ``disc_batch`` per iteration; ``ablation`` one of
+    :data:`ABLATIONS` or empty."""
+
+    iterations: int = 50
+    steps_per_env: int = 24
+    env: PostEnvConfig = field(default_factory=PostEnvConfig)
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    disc: DiscriminatorConfig = field(default_factory=DiscriminatorConfig)
+    disc_steps: int = 8
+    disc_batch: int = 256
+    init_std: float = 0.05
+    ablation: str = ""
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.ablation and self.ablation not in ABLATIONS:
+            raise InputError(None, "ablation", f"unknown ablation {self.ablation!r}; known: {', '.join(ABLATIONS)}")
+
+
+class AdversarialPPO(PPO):
+    """PPO whose reward gains the style priors' rewards and whose update also trains the priors (module docstring).
+    ``priors`` maps ``"aip"`` / ``"amp"`` to ``(discriminator, reference buffer)``; ``vae`` encodes the AIP's z."""
+
+    def __init__(self, actor, critic, storage, *, priors: dict, vae: DFVAE, weights: RewardWeights,
+                 disc: PostTrainConfig, **ppo) -> None:  # fmt: skip
+        super().__init__(actor, critic, storage, **ppo)
+        self.priors, self.vae, self.weights = priors, vae, weights
+        self.style_weight = {"aip": weights.interaction_style, "amp": weights.motion_style}
+        self.disc_steps, self.disc_batch = disc.disc_steps, disc.disc_batch
+        self.disc_optim = {k: torch.optim.Adam(d.parameters(), lr=d.config.lr) for k, (d, _) in priors.items()}
+        self.samples: dict[str, list[torch.Tensor]] = {k: [] for k in priors}
+        self.style_rewards: dict[str, float] = {}
+
+    def style_inputs(self, style: dict) -> dict[str, torch.Tensor]:
+        """What each prior reads from the environment's ``extras["style"]``."""
+        return {"aip": self.vae.encode(style["df"]), "amp": style["transition"]}
+
+    def process_env_step(self, obs, rewards, dones, extras) -> None:
+        inputs = self.style_inputs(extras["style"])
+        total = rewards.clone()
+        for name, (disc, _) in self.priors.items():
+            r = lsgan_reward(disc(inputs[name]))
+            total += self.style_weight[name] * r
+            self.samples[name].append(inputs[name])
+            self.style_rewards[name] = float(r.mean())
+        super().process_env_step(obs, total, dones, extras)
+
+    def update(self) -> dict[str, float]:
+        losses = super().update()
+        for name, (disc, reference) in self.priors.items():
+            policy = torch.cat(self.samples[name]).clone()  # out of inference mode
+            self.samples[name] = []
+            for _ in range(self.disc_steps):
+                pol = policy[torch.randint(len(policy), (self.disc_batch,))]
+                ref = reference[torch.randint(len(reference), (self.disc_batch,))]
+                loss, parts = disc.loss(ref, pol)
+                self.disc_optim[name].zero_grad()
+                loss.backward()
+                self.disc_optim[name].step()
+            losses |= {f"{name}_{k}": v for k, v in parts.items()}
+            losses[f"{name}_reward"] = self.style_rewards.get(name, 0.0)
+        return losses
+
+
+def reference_buffers(name: str, vae: DFVAE) -> dict[str, torch.Tensor]:
+    """``{"aip": (F, latent), "amp": (F - E, 2 x 64)}`` from the valid episodes of corpus ``name``'s features
+    dataset (module docstring)."""
+    root = stage_dir(name, "features")
+    episodes = load_episodes(name, valid_only=False)
+    cols = {k: np.array(v) for k, v in read_columns(root, [DF_COLUMN, PROPRIO_COLUMN]).items()}  # writable
+    starts, ends, _ = episode_ranges(root)
+    latents, transitions = [], []
+    for e, a, b in zip(episodes, starts, ends):
+        if not e.simulated.validation.get("valid", False):
+            continue
+        with torch.no_grad():
+            latents.append(vae.encode(torch.as_tensor(cols[DF_COLUMN][a:b], dtype=torch.float32)))
+        s = cols[PROPRIO_COLUMN][a:b, AMP_STATE]
+        transitions.append(torch.as_tensor(np.concatenate([s[:-1], s[1:]], axis=1), dtype=torch.float32))
+    if not latents:
+        raise InputError(root, "validation.valid", "no valid episode to build the reference buffers from")
+    return {"aip": torch.cat(latents), "amp": torch.cat(transitions)}
+
+
+def _save_state(alg: AdversarialPPO, iteration: int, path: Path) -> None:
+    buf = io.BytesIO()
+    state = alg.save() | {
+        "iteration": iteration,
+        "priors": {k: d.state_dict() for k, (d, _) in alg.priors.items()},
+        "prior_optimizers": {k: o.state_dict() for k, o in alg.disc_optim.items()},
+        "torch_rng": torch.get_rng_state(),
+    }
+    torch.save(state, buf)
+    write_bytes_atomic(path, buf.getvalue())
+
+
+def post_train(name: str, policy_path: str | Path, out_dir: str | Path, config: PostTrainConfig = PostTrainConfig(),
+               device: str = "cpu") -> dict:  # fmt: skip
+    """Post-train the policy at ``policy_path`` on corpus ``name`` into ``out_dir`` (module docstring); resumes after
+    the last finished iteration. Returns the last log row."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(config.seed)
+    env_cfg = replace(
+        config.env, seed=config.seed, **({"scale_range": (1.0, 1.0)} if config.ablation == "-Rand" else {})
+    )
+    env = PostTrainEnv(load_episodes(name), load_policy(policy_path).layout.history, env_cfg, device)
+    obs = env.get_observations()
+    groups = {"actor": ["policy"], "critic": ["critic"]}
+    actor = InteractionActor(obs, groups, "actor", env.num_actions, str(policy_path), init_std=config.init_std)
+    critic = MLPModel(obs, groups, "critic", 1, hidden_dims=(256, 256, 128), activation="elu", obs_normalization=True)
+    storage = RolloutStorage("rl", env.num_envs, config.steps_per_env, obs, [env.num_actions], device)
+    vae = actor.policy.vae
+    refs = reference_buffers(name, vae)
+    priors = {k: (Discriminator(refs[k], config.disc).to(device), refs[k].to(device)) for k in ("aip", "amp")}
+    if config.ablation == "-AIP":
+        priors.pop("aip")
+    alg = AdversarialPPO(actor, critic, storage, priors=priors, vae=vae, weights=env_cfg.weights, disc=config,
+                         device=device, **asdict(config.ppo))  # fmt: skip
+    state_path, log_path = out_dir / "post_state.pt", out_dir / "post_log.jsonl"
+    start = 0
+    if state_path.is_file():
+        state = torch.load(state_path, map_location=device, weights_only=False)
+        alg.load(state, None, strict=True)
+        for k, (d, _) in priors.items():
+            d.load_state_dict(state["priors"][k])
+            alg.disc_optim[k].load_state_dict(state["prior_optimizers"][k])
+        torch.set_rng_state(state["torch_rng"])
+        start = state["iteration"] + 1
+    row: dict = {}
+    for it in tqdm(range(start, config.iterations), desc="post-train", unit="iteration"):
+        t0 = time.perf_counter()
+        alg.train_mode()
+        returns, falls, logs = [], 0, []
+        with torch.inference_mode():
+            for _ in range(config.steps_per_env):
+                obs, reward, done, extras = env.step(alg.act(obs))
+                alg.process_env_step(obs, reward, done, extras)
+                returns.append(float(reward.mean()))
+                falls += int((done & ~extras["time_outs"]).sum())
+                logs.append(extras["log"])
+            alg.compute_returns(obs)
+        losses = alg.update()
+        row = {
+            "iteration": it,
+            "env_steps": (it + 1) * config.steps_per_env * env.num_envs,
+            "task_reward": float(np.mean(returns)),
+            "falls": falls,
+            **{k.strip("/").replace("/", "."): float(np.mean([g[k] for g in logs])) for k in logs[0]},
+            **losses,
+            "learning_rate": alg.learning_rate,
+            "action_std": float(actor.distribution.log_std_param.detach().exp().mean()),
+            "seconds": time.perf_counter() - t0,
+        }
+        save_policy(actor.policy, out_dir / "policy.pt", post_train_config=_jsonable(asdict(config)))
+        _save_state(alg, it, state_path)
+        with log_path.open("a", encoding="utf-8") as f:
+            f.write(json.dumps(row) + "\n")
+    env.close()
+    return row
+
+
+def _jsonable(d: dict) -> dict:
+    return json.loads(json.dumps(d, default=list))

@@ -1,0 +1,131 @@
+"""The interaction environment as rsl_rl's :class:`~rsl_rl.env.VecEnv` for post-training (paper Sec. III-C): ``N``
+environments that never stop (a finished episode restarts at once with a new draw), the policy's observation
+history, and the task rewards of the paper's table (:mod:`train.rewards`) measured after every step.
+
+* **Episodes**: each start draws a training episode uniformly and an object scale per axis uniformly in
+  :attr:`PostEnvConfig.scale_range` (the geometry randomisation: the paper post-trains on procedurally varied
+  objects, while BC + DAgger only saw 1.0). The root command is the episode's, whatever the scale.
+* **Observations** (a TensorDict): ``policy``, the flat ``l``-step windows :class:`train.rl_model.InteractionActor`
+  reads (:func:`train.rl_model.flatten_windows`); ``critic``, the current step's ``[proprio, root_command, df]``.
+* **Rewards** after the step, before any restart: root tracking against the episode's simulated root at its time,
+  object tracking against the object's reference track, the action rate, the termination (a fall, not a
+  time-out) and the soft joint limits (:func:`task_rewards`). The style rewards (AIP, AMP) are the algorithm's
+  (:class:`train.aip.AdversarialPPO`): ``extras["style"]`` carries what they read, taken before any restart: the DF
+  features ``df`` (N, 10K) of the state reached and the AMP transition ``(s_t, s_(t+1))`` (N, 2 x 64) with ``s`` the
+  proprioception without the previous action (:data:`AMP_STATE`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from pipeline.robot import NUM_JOINTS
+from train import rewards as R
+from train.actors import History
+from train.env import EnvConfig, InteractionEnv
+from train.episodes import Episode
+from train.rl_model import flatten_windows
+
+AMP_STATE = slice(0, 2 * NUM_JOINTS + 6)
+"""The columns of ``proprio`` the AMP discriminator reads: ``[q, dq, gravity_root, omega_root]`` (64)."""
+
+
+@dataclass(frozen=True)
+class PostEnvConfig:
+    """``envs`` environments stepped in ``threads`` threads; ``scale_range`` of the per-axis object scale drawn at
+    every episode start; the reward ``weights``; ``seed`` of the draws."""
+
+    envs: int = 8
+    threads: int = 1
+    scale_range: tuple[float, float] = (0.4, 1.6)
+    weights: R.RewardWeights = field(default_factory=R.RewardWeights)
+    seed: int = 0
+
+
+def task_rewards(env: InteractionEnv, actions: np.ndarray, last_actions: np.ndarray, weights: R.RewardWeights):
+    """(N,) the weighted task terms after a step, and each term's mean (for the log)."""
+    slots = env.slots
+    root = np.stack([s.data.qpos[:3] for s in slots])
+    ref_root = np.stack([s.episode.simulated.robot.qpos[min(s.t, s.episode.simulated.frames - 1), :3] for s in slots])
+    obj = np.stack([s.last_facts.object_pos for s in slots])
+    obj_ref = np.stack([s.last_facts.object_ref for s in slots])
+    fell = np.array([s.fell for s in slots])
+    m = slots[0].scene.model
+    lower, upper = m.jnt_range[1 : 1 + NUM_JOINTS].T
+    q = np.stack([s.data.qpos[7 : 7 + NUM_JOINTS] for s in slots])
+    terms = {
+        "root_tracking": R.root_tracking(root, ref_root),
+        "object_tracking": R.object_tracking(obj, obj_ref, weights.object_sigma_m),
+        "action_rate": R.action_rate(actions, last_actions),
+        "termination": R.termination(fell, np.zeros_like(fell)),
+        "joint_limits": R.joint_limits(q, lower, upper),
+    }
+    return R.total(terms, weights), {k: float(np.mean(v)) for k, v in terms.items()}
+
+
+class PostTrainEnv(VecEnv):
+    """``config.envs`` restarting environments over ``episodes`` for a policy with an ``history``-step window."""
+
+    def __init__(self, episodes: list[Episode], history: int, config: PostEnvConfig = PostEnvConfig(), device="cpu"):
+        if not episodes:
+            raise ValueError("post-training needs at least one episode")
+        self.episodes, self.config, self.cfg, self.device = episodes, config, config, torch.device(device)
+        self.rng = np.random.default_rng([config.seed, 7])
+        self.env = InteractionEnv(EnvConfig(threads=config.threads))
+        self.history = History(history)
+        self.history.reset(self.env.reset([self._draw() for _ in range(config.envs)]))
+        self.num_envs, self.num_actions = config.envs, NUM_JOINTS
+        self.max_episode_length = max(e.simulated.frames for e in episodes)
+        self.episode_length_buf = torch.zeros(config.envs, dtype=torch.long, device=self.device)
+
+    def _draw(self) -> tuple[Episode, np.ndarray]:
+        lo, hi = self.config.scale_range
+        return self.episodes[self.rng.integers(len(self.episodes))], self.rng.uniform(lo, hi, 3)
+
+    def _tensor(self, x: np.ndarray) -> torch.Tensor:
+        return torch.as_tensor(x, dtype=torch.float32, device=self.device)
+
+    def get_observations(self) -> TensorDict:
+        h = self.history.terms
+        current = np.concatenate([h["proprio"][:, -1], h["root_command"][:, -1], h["df"][:, -1]], axis=1)
+        return TensorDict(
+            {
+                "policy": self._tensor(flatten_windows(h["proprio"], h["root_command"], h["df"])),
+                "critic": self._tensor(current),
+            },
+            batch_size=[self.num_envs],
+        )
+
+    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+        """Step every environment with raw joint targets ``actions`` (N, 29); restart the finished ones."""
+        a = actions.detach().cpu().numpy().astype(np.float64)
+        last = np.stack([s.last_action for s in self.env.slots])
+        before = self.history.terms["proprio"][:, -1, AMP_STATE]
+        obs, done = self.env.step(a)
+        reward, means = task_rewards(self.env, a, last, self.config.weights)
+        fell = np.array([s.fell for s in self.env.slots])
+        style = {
+            "df": self._tensor(obs.df),
+            "transition": self._tensor(np.concatenate([before, obs.proprio[:, AMP_STATE]], axis=1)),
+        }
+        self.history.push(obs)
+        self.episode_length_buf += 1
+        if done.any():
+            for i in np.flatnonzero(done):
+                self.env.reset_one(i, *self._draw())
+            self.history.reset(self.env.observe(), which=done)
+            self.episode_length_buf[torch.as_tensor(done, device=self.device)] = 0
+        extras = {
+            "time_outs": torch.as_tensor(done & ~fell, device=self.device),
+            "style": style,
+            "log": {f"/reward/{k}": v for k, v in means.items()},
+        }
+        return self.get_observations(), self._tensor(reward), torch.as_tensor(done, device=self.device), extras
+
+    def close(self) -> None:
+        self.env.close()
