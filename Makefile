@@ -18,7 +18,7 @@ RUN_ARGS = -j $(JOBS) --executor $(EXECUTOR)
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install lint format retarget import physicalize train-residual features corpus train-bc eval test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-train bench-features clean-venv
+.PHONY: install lint format retarget import physicalize train-residual features corpus train-bc train-aip eval test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-train bench-features clean-venv
 
 install: $(VENV)/.installed
 
@@ -81,6 +81,14 @@ RUN ?= bc
 TRAIN_ARGS ?=
 train-bc: install
 	$(CLI) train-bc --name $(CORPUS) --run runs/$(RUN) $(if $(OVERWRITE),--overwrite) $(TRAIN_ARGS)
+
+# Train II (paper Sec. III-C): PPO from runs/$(RUN)/policy.pt with the AIP and AMP style priors, objects scaled per
+# axis in 0.4-1.6, into runs/$(RUN)/aip$(ABLATION)/ (ABLATION=-AIP or -Rand); resumable. Score it with
+# `make eval POLICY=runs/$(RUN)/aip/policy.pt`.
+ABLATION ?=
+AIP_ARGS ?=
+train-aip: install
+	$(CLI) train-aip --name $(CORPUS) --run runs/$(RUN) $(if $(ABLATION),--ablation=$(ABLATION)) $(AIP_ARGS)
 
 POLICY ?= runs/$(RUN)/policy.pt
 EVAL_ARGS ?=

@@ -1,5 +1,5 @@
-"""``lessmimic train-bc`` and ``lessmimic eval``: the training commands (Train I, :mod:`train`); the rest of the
-command line is :mod:`lessmimic.cli`, which registers these with :func:`add_train`."""
+"""``lessmimic train-bc``, ``lessmimic train-aip`` and ``lessmimic eval``: the training commands (:mod:`train`);
+the rest of the command line is :mod:`lessmimic.cli`, which registers these with :func:`add_train`."""
 
 from __future__ import annotations
 
@@ -67,6 +67,33 @@ def _cmd_eval(a: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_train_aip(a: argparse.Namespace) -> int:
+    import torch
+
+    from train.aip import PostTrainConfig, post_train
+    from train.post_env import PostEnvConfig
+
+    torch.set_num_threads(a.threads)
+    cfg = PostTrainConfig(
+        iterations=a.iterations,
+        steps_per_env=a.steps_per_env,
+        env=PostEnvConfig(envs=a.envs, threads=a.env_threads),
+        ablation=a.ablation,
+        seed=a.seed,
+    )
+    policy = Path(a.run) / "policy.pt"
+    if not policy.is_file():
+        raise InputError(policy, "policy.pt", "no BC + DAgger policy here: run `make train-bc` first")
+    out = Path(a.run) / f"aip{a.ablation}"
+    row = post_train(a.name, policy, out, cfg, device=a.device)
+    print(
+        f"post-trained {out / 'policy.pt'}: {row.get('iteration', -1) + 1} PPO iterations, {row.get('env_steps', 0)} "
+        f"env steps; last task reward {row.get('task_reward', float('nan')):.3f}, AIP reward "
+        f"{row.get('aip_reward', float('nan')):.3f}, AMP reward {row.get('amp_reward', float('nan')):.3f}"
+    )
+    return 0
+
+
 def add_train(sub) -> None:
     p = sub.add_parser(
         "train-bc",
@@ -93,6 +120,24 @@ def add_train(sub) -> None:
     p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (1 is fastest on a loaded 2-core machine)")
     p.set_defaults(func=_cmd_train_bc)
+    p = sub.add_parser(
+        "train-aip",
+        help="post-train a run's BC + DAgger policy: PPO with the AIP and AMP style priors (runs/<RUN>/aip<ABLATION>/)",
+    )
+    from train.aip import PostTrainConfig
+
+    d = PostTrainConfig()
+    p.add_argument("--name", default="corpus", help="the corpus (its valid episodes and its reference buffers)")
+    p.add_argument("--run", default="runs/bc", help="the BC + DAgger run folder (its policy.pt); a rerun resumes")
+    p.add_argument("--ablation", default="", help="-AIP (no interaction prior) or -Rand (object scale 1.0 only)")
+    p.add_argument("--iterations", type=int, default=d.iterations, help="PPO iterations")
+    p.add_argument("--steps-per-env", type=int, default=d.steps_per_env, help="rollout steps per env and iteration")
+    p.add_argument("--envs", type=int, default=d.env.envs, help="environments stepped together")
+    p.add_argument("--env-threads", type=int, default=1, help="threads stepping the environments")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
+    p.add_argument("--threads", type=int, default=1, help="torch threads")
+    p.set_defaults(func=_cmd_train_aip)
     p = sub.add_parser("eval", help="the paper's Table 2 evaluation of a policy and/or the QP teacher baseline")
     p.add_argument("--policy", default=None, help="a policy checkpoint (runs/<RUN>/policy.pt)")
     p.add_argument("--teacher", action="store_true", help="also score the QP teacher tracking the 1.0x reference")

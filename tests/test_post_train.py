@@ -99,8 +99,18 @@ def test_one_ppo_iteration_from_a_bc_checkpoint_trains_the_policy_and_both_prior
     assert [r["iteration"] for r in rows] == [0, 1]
 
 
-def test_ablations_drop_what_they_name_and_unknown_ones_are_refused(bc_policy, tmp_path):
+def test_ablations_drop_what_they_name_and_unknown_ones_are_refused(bc_policy, tmp_path, capsys):
+    from lessmimic.cli import main
+    from train.evaluate import EvalConfig, scale_line, scale_note
+
     row = post_train("train", bc_policy, tmp_path, replace(SMOKE, ablation="-AIP"))
     assert "aip_reward" not in row and "amp_reward" in row
+    line = scale_line(scale_note("train", EvalConfig(), tmp_path / "policy.pt"))
+    assert "post-trained 1 PPO iterations (12 env steps in 2 envs, ablation -AIP)" in line
     with pytest.raises(InputError, match="ablation: unknown ablation '-Foo'; known: -AIP, -Rand"):
         PostTrainConfig(ablation="-Foo")
+    capsys.readouterr()  # the progress bars so far
+    assert main(["train-aip", "--name", "train", "--run", str(bc_policy.parent), "--ablation=-Foo"]) == 2
+    assert main(["train-aip", "--name", "train", "--run", str(tmp_path / "none")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "unknown ablation '-Foo'" in err[0] and "no BC + DAgger policy here" in err[1]

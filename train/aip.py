@@ -35,7 +35,7 @@ from tqdm import tqdm
 
 from pipeline.dataset.read import episode_ranges, read_columns
 from pipeline.errors import InputError
-from pipeline.stage.atomic import write_bytes_atomic
+from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
 from pipeline.stage.paths import stage_dir
 from train.discriminator import Discriminator, DiscriminatorConfig
 from train.episodes import load_episodes
@@ -225,7 +225,24 @@ def post_train(name: str, policy_path: str | Path, out_dir: str | Path, config: 
         with log_path.open("a", encoding="utf-8") as f:
             f.write(json.dumps(row) + "\n")
     env.close()
+    _report(policy_path, out_dir, config, row)
     return row
+
+
+def _report(policy_path: str | Path, out_dir: Path, config: PostTrainConfig, row: dict) -> None:
+    """``out_dir/report.json``: the pre-training run's scale (its ``report.json``) with the post-training's added,
+    so an evaluation of ``out_dir/policy.pt`` says both."""
+    pre = Path(policy_path).parent / "report.json"
+    scale = json.loads(pre.read_text()).get("scale", {}) if pre.is_file() else {}
+    post = {
+        "iterations": row.get("iteration", -1) + 1,
+        "env_steps": row.get("env_steps", 0),
+        "envs": config.env.envs,
+        "steps_per_env": config.steps_per_env,
+        "ablation": config.ablation or "none",
+        "from": str(policy_path),
+    }
+    write_json_atomic(out_dir / "report.json", {"scale": {**scale, "post_training": post}})
 
 
 def _jsonable(d: dict) -> dict:

@@ -154,13 +154,20 @@ def scale_line(note: dict) -> str:
     policy = note.get("policy")
     if policy:
         s = policy.get("training_scale")
+        s = s if isinstance(s, dict) else {}
         trained = (
             f"{s['corpus_episodes']} corpus episodes ({s['corpus_frames']} frames), BC {s['bc_steps']} steps "
             f"({s['bc_samples']} samples), DAgger {s['dagger_iterations']} iterations x "
             f"{s['dagger_episodes_per_iteration']} episodes ({s['dagger_windows']} windows), on {s['device']}"
-            if isinstance(s, dict)
+            if "corpus_episodes" in s
             else "unknown (no report.json beside it)"
         )
+        post = s.get("post_training")
+        if post:
+            trained += (
+                f", then post-trained {post['iterations']} PPO iterations ({post['env_steps']} env steps in "
+                f"{post['envs']} envs, ablation {post['ablation']})"
+            )
         line += f" Policy `{policy['checkpoint']}`, trained on {trained}."
     return line
 
