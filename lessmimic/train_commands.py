@@ -129,7 +129,7 @@ def add_train(sub) -> None:
     d = PostTrainConfig()
     p.add_argument("--name", default="corpus", help="the corpus (its valid episodes and its reference buffers)")
     p.add_argument("--run", default="runs/bc", help="the BC + DAgger run folder (its policy.pt); a rerun resumes")
-    p.add_argument("--ablation", default="", help="-AIP (no interaction prior) or -Rand (object scale 1.0 only)")
+    p.add_argument("--ablation", default="", help="-AIP (no interaction prior) or -Rand (no randomisation)")
     p.add_argument("--iterations", type=int, default=d.iterations, help="PPO iterations")
     p.add_argument("--steps-per-env", type=int, default=d.steps_per_env, help="rollout steps per env and iteration")
     p.add_argument("--envs", type=int, default=d.env.envs, help="environments stepped together")

@@ -73,7 +73,9 @@ def test_the_environment_restarts_episodes_and_hands_the_priors_their_inputs(bc_
     np.testing.assert_allclose(transition[:, 64:], env.history.terms["proprio"][:, -1, AMP_STATE], atol=1e-5)
     assert obs["policy"].shape == (2, 5 * (93 + 12 + env.history.terms["df"].shape[-1]))
     assert reward.shape == (2,) and torch.isfinite(reward).all() and not done.any()
-    assert extras["log"]["/reward/termination"] == 0.0 and extras["log"]["/reward/action_rate"] > 0
+    assert extras["log"]["/reward/termination"] == 0.0 and extras["log"]["/reward/action_rate"] == 0.0  # first step
+    _, _, _, extras = env.step(hold + 0.01)  # the policy's targets, before the actuation noise
+    assert extras["log"]["/reward/action_rate"] == pytest.approx(29 * 0.01**2, rel=1e-4)
     env.env.slots[0].done = True  # an episode that ends is restarted at once with a new draw
     first = env.env.slots[0]
     env.step(hold)
@@ -114,3 +116,32 @@ def test_ablations_drop_what_they_name_and_unknown_ones_are_refused(bc_policy, t
     assert main(["train-aip", "--name", "train", "--run", str(tmp_path / "none")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and "unknown ablation '-Foo'" in err[0] and "no BC + DAgger policy here" in err[1]
+
+
+def test_an_episodes_variation_reaches_the_scene_the_initial_state_and_the_command(bc_policy):
+    import mujoco
+
+    from train.env import InteractionEnv
+    from train.randomize import Variation
+
+    episode = next(e for e in load_episodes("train") if e.task == "PickUp")
+    v = Variation(cylinder=True, mass_factor=1.5, friction_factor=0.5, restitution=0.2, robot_offset=(0.03, 0, 0),
+                  command_offset=(0.05, 0, 0))  # fmt: skip
+    env = InteractionEnv()
+    plain = env.reset([(episode, 1.0)])
+    base = env.slots[0]
+    varied = env.reset([(episode, 1.0, v)])
+    slot = env.slots[0]
+    (name,) = slot.scene.object_body_id
+    m, m0 = slot.scene.model, base.scene.model
+    body, body0 = slot.scene.object_body_id[name], base.scene.object_body_id[name]
+    geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] == body and m.geom_contype[g]]
+    geoms0 = [g for g in range(m0.ngeom) if m0.geom_bodyid[g] == body0 and m0.geom_contype[g]]
+    assert {m.geom_type[g] for g in geoms} == {mujoco.mjtGeom.mjGEOM_CYLINDER}
+    assert {m0.geom_type[g] for g in geoms0} == {mujoco.mjtGeom.mjGEOM_BOX}
+    assert m.body_mass[body] == pytest.approx(1.5 * m0.body_mass[body0])
+    assert m.geom_friction[geoms[0], 0] == pytest.approx(0.5 * m0.geom_friction[geoms0[0], 0])
+    assert m.geom_solref[geoms[0], 0] < 0 <= m0.geom_solref[geoms0[0], 0]  # restitution: a contact spring
+    assert slot.data.qpos[0] - base.data.qpos[0] == pytest.approx(0.03)
+    moved = np.linalg.norm(varied.root_command[0, :3] - plain.root_command[0, :3])
+    assert moved == pytest.approx(0.02, abs=1e-9)  # the target 5 cm ahead, the robot 3 cm

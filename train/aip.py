@@ -9,13 +9,14 @@ priors. Read top to bottom:
    samples against its reference buffer, at the paper's 2e-4;
 2. :func:`reference_buffers`: ``B_ref`` of the AIP is the VAE latents of every frame of the valid episodes of the
    features dataset (the pre-training data); the AMP's is their consecutive-frame transitions;
-3. :func:`post_train` builds the restarting environment (:class:`train.post_env.PostTrainEnv`, object scale drawn
-   per axis in 0.4-1.6), the actor (:class:`train.rl_model.InteractionActor`, initialised from ``policy.pt``),
-   an MLP critic (rsl_rl's, normalised inputs), and runs ``iterations`` of: ``steps_per_env`` steps of
-   rollout, returns (GAE), PPO update, discriminator update; a row of ``post_log.jsonl`` per iteration, and
-   ``policy.pt`` (an interaction-policy checkpoint that ``lessmimic eval`` scores like any other) after each.
+3. :func:`post_train` builds the restarting environment (:class:`train.post_env.PostTrainEnv`, with the six
+   randomisations of :mod:`train.randomize`), the actor (:class:`train.rl_model.InteractionActor`, initialised
+   from ``policy.pt``), an MLP critic (rsl_rl's, normalised inputs), and runs ``iterations`` of:
+   ``steps_per_env`` steps of rollout, returns (GAE), PPO update, discriminator update; a row of
+   ``post_log.jsonl`` per iteration, and ``policy.pt`` (an interaction-policy checkpoint that ``lessmimic eval``
+   scores like any other) after each.
 
-Ablations: ``-AIP`` drops the interaction prior, ``-Rand`` keeps the object at scale 1.0.
+Ablations: ``-AIP`` drops the interaction prior, ``-Rand`` every randomisation (:mod:`train.randomize`).
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from train.discriminator import Discriminator, DiscriminatorConfig
 from train.episodes import load_episodes
 from train.policy import PROPRIO_COLUMN, load_policy, save_policy
 from train.post_env import AMP_STATE, PostEnvConfig, PostTrainEnv
+from train.randomize import RandomizationConfig
 from train.rewards import RewardWeights, lsgan_reward
 from train.rl_model import InteractionActor
 from train.vae import DF_COLUMN, DFVAE
@@ -169,9 +171,9 @@ def post_train(name: str, policy_path: str | Path, out_dir: str | Path, config: 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
-    env_cfg = replace(
-        config.env, seed=config.seed, **({"scale_range": (1.0, 1.0)} if config.ablation == "-Rand" else {})
-    )
+    env_cfg = replace(config.env, seed=config.seed)
+    if config.ablation == "-Rand":
+        env_cfg = replace(env_cfg, randomization=RandomizationConfig.off())
     env = PostTrainEnv(load_episodes(name), load_policy(policy_path).layout.history, env_cfg, device)
     obs = env.get_observations()
     groups = {"actor": ["policy"], "critic": ["critic"]}

@@ -36,7 +36,9 @@ from pipeline.scene import Scene, SceneObject, build_scene, link_collision_geoms
 from pipeline.terms.interaction import interaction_features
 from pipeline.terms.link_motion import body_ids, link_motion, link_state
 from pipeline.terms.observations import command_frames, proprioception, root_command_to
+from train import randomize as R
 from train.episodes import Episode, check_scale, scaled_objects
+from train.randomize import Variation
 from train.tasks import Rules, StepFacts, TaskMeter
 
 
@@ -62,13 +64,19 @@ class Obs:
 class _Slot:
     """One environment: its scene, state, episode and meters."""
 
-    def __init__(self, episode: Episode, scale, cfg: EnvConfig, fields: dict):
-        self.episode, self.scale = episode, check_scale(scale)
+    def __init__(self, episode: Episode, scale, cfg: EnvConfig, fields: dict, variation: Variation | None = None):
+        self.episode, self.scale, self.variation = episode, check_scale(scale), variation
         sim = episode.simulated
         self.objects = scaled_objects(sim.robot.objects, self.scale)
-        self.scene: Scene = build_scene(
-            [SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in self.objects], episode.profile
-        )
+        if variation is None:
+            placed = [SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in self.objects]
+        else:  # the randomisations drawn once per episode (train.randomize)
+            self.objects = tuple(R.vary_shape(o, variation) for o in self.objects)
+            placed = [
+                SceneObject(o.name, o.geometry, R.object_physics(o, variation), pose=R.placed(o, variation))
+                for o in self.objects
+            ]
+        self.scene: Scene = build_scene(placed, episode.profile)
         m = self.scene.model
         self.data = mujoco.MjData(m)
         self.ids = body_ids(m, cfg.links)
@@ -100,6 +108,10 @@ class _Slot:
         self.t, self.done, self.fell = 0, False, False
         self.last_action = np.zeros(NUM_JOINTS)
         self.set_state(sim.robot.qpos[0], sim.qvel[0])
+        if variation is not None:
+            free = list(self.scene.object_qpos_adr.values())
+            R.perturb_initial_state(self.data.qpos, m.jnt_range[1 : 1 + NUM_JOINTS], free, variation)
+            mujoco.mj_forward(m, self.data)
 
     def set_state(self, qpos: np.ndarray, qvel: np.ndarray, objects: np.ndarray | None = None) -> None:
         """The robot at ``(qpos, qvel)``; the objects at ``objects`` (nq - 36), else their track at ``t``, at rest."""
@@ -196,13 +208,14 @@ class InteractionEnv:
     def num_envs(self) -> int:
         return len(self.slots)
 
-    def reset(self, assignments: list[tuple[Episode, object]]) -> Obs:
-        """Start every environment: ``assignments[i] = (episode, scale)``; the observation of the first frame."""
-        self.slots = [_Slot(e, s, self.cfg, self._fields) for e, s in assignments]
+    def reset(self, assignments: list[tuple]) -> Obs:
+        """Start every environment: ``assignments[i] = (episode, scale)`` or ``(episode, scale, variation)`` (a
+        :class:`train.randomize.Variation`); the observation of the first frame."""
+        self.slots = [_Slot(e, s, self.cfg, self._fields, *v) for e, s, *v in assignments]
         return self.observe()
 
-    def reset_one(self, i: int, episode: Episode, scale) -> None:
-        self.slots[i] = _Slot(episode, scale, self.cfg, self._fields)
+    def reset_one(self, i: int, episode: Episode, scale, variation: Variation | None = None) -> None:
+        self.slots[i] = _Slot(episode, scale, self.cfg, self._fields, variation)
 
     def step(self, actions: np.ndarray) -> tuple[Obs, np.ndarray]:
         """Apply ``actions`` (N, 29) to the running environments (finished ones stand still); ``(obs, done)``."""
@@ -228,6 +241,8 @@ class InteractionEnv:
             sim = s.episode.simulated
             j = s.command[min(s.t, sim.frames - 1)]
             target_q[i], target_v[i] = sim.robot.qpos[j, :7], sim.qvel[j, :3]
+            if s.variation is not None:
+                target_q[i] = R.perturb_command(target_q[i], s.variation)
             pos[i], _, vel[i] = link_state(s.scene.model, s.data, s.ids)
             groups.setdefault(id(s.fields), []).append(i)
         phi, grad = np.zeros(pos.shape[:2]), np.zeros(pos.shape)

@@ -2,14 +2,16 @@
 environments that never stop (a finished episode restarts at once with a new draw), the policy's observation
 history, and the task rewards of the paper's table (:mod:`train.rewards`) measured after every step.
 
-* **Episodes**: each start draws a training episode uniformly and an object scale per axis uniformly in
-  :attr:`PostEnvConfig.scale_range` (the geometry randomisation: the paper post-trains on procedurally varied
-  objects, while BC + DAgger only saw 1.0). The root command is the episode's, whatever the scale.
+* **Episodes**: each start draws a training episode uniformly and its randomisations (:mod:`train.randomize`:
+  object scale per axis and shape, physical properties, initial offsets, command offset); every step adds the
+  actuation noise to the joint targets and the perception noise to the DF features the policy reads. The paper
+  post-trains on procedurally varied objects, while BC + DAgger only saw scale 1.0.
 * **Observations** (a TensorDict): ``policy``, the flat ``l``-step windows :class:`train.rl_model.InteractionActor`
   reads (:func:`train.rl_model.flatten_windows`); ``critic``, the current step's ``[proprio, root_command, df]``.
 * **Rewards** after the step, before any restart: root tracking against the episode's simulated root at its time,
   object tracking against the object's reference track, the action rate, the termination (a fall, not a
-  time-out) and the soft joint limits (:func:`task_rewards`). The style rewards (AIP, AMP) are the algorithm's
+  time-out) and the soft joint limits (:func:`task_rewards`); the action rate compares the policy's targets
+  (before the actuation noise) and is 0 on an episode's first step. The style rewards (AIP, AMP) are the algorithm's
   (:class:`train.aip.AdversarialPPO`): ``extras["style"]`` carries what they read, taken before any restart: the DF
   features ``df`` (N, 10K) of the state reached and the AMP transition ``(s_t, s_(t+1))`` (N, 2 x 64) with ``s`` the
   proprioception without the previous action (:data:`AMP_STATE`).
@@ -17,7 +19,7 @@ history, and the task rewards of the paper's table (:mod:`train.rewards`) measur
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
@@ -27,8 +29,9 @@ from tensordict import TensorDict
 from pipeline.robot import NUM_JOINTS
 from train import rewards as R
 from train.actors import History
-from train.env import EnvConfig, InteractionEnv
+from train.env import EnvConfig, InteractionEnv, Obs
 from train.episodes import Episode
+from train.randomize import RandomizationConfig, Variation, actuation_noise, draw, perception_noise
 from train.rl_model import flatten_windows
 
 AMP_STATE = slice(0, 2 * NUM_JOINTS + 6)
@@ -37,18 +40,19 @@ AMP_STATE = slice(0, 2 * NUM_JOINTS + 6)
 
 @dataclass(frozen=True)
 class PostEnvConfig:
-    """``envs`` environments stepped in ``threads`` threads; ``scale_range`` of the per-axis object scale drawn at
-    every episode start; the reward ``weights``; ``seed`` of the draws."""
+    """``envs`` environments stepped in ``threads`` threads; the ``randomization`` ranges; the reward ``weights``;
+    ``seed`` of the draws."""
 
     envs: int = 8
     threads: int = 1
-    scale_range: tuple[float, float] = (0.4, 1.6)
+    randomization: RandomizationConfig = field(default_factory=RandomizationConfig)
     weights: R.RewardWeights = field(default_factory=R.RewardWeights)
     seed: int = 0
 
 
 def task_rewards(env: InteractionEnv, actions: np.ndarray, last_actions: np.ndarray, weights: R.RewardWeights):
-    """(N,) the weighted task terms after a step, and each term's mean (for the log)."""
+    """(N,) the weighted task terms after a step (``last_actions`` the targets of the step before, or the same
+    ``actions`` on an episode's first step), and each term's mean (for the log)."""
     slots = env.slots
     root = np.stack([s.data.qpos[:3] for s in slots])
     ref_root = np.stack([s.episode.simulated.robot.qpos[min(s.t, s.episode.simulated.frames - 1), :3] for s in slots])
@@ -78,14 +82,19 @@ class PostTrainEnv(VecEnv):
         self.rng = np.random.default_rng([config.seed, 7])
         self.env = InteractionEnv(EnvConfig(threads=config.threads))
         self.history = History(history)
-        self.history.reset(self.env.reset([self._draw() for _ in range(config.envs)]))
+        self.history.reset(self._seen(self.env.reset([self._draw() for _ in range(config.envs)])))
+        self.last_actions = np.stack([s.last_action for s in self.env.slots])
         self.num_envs, self.num_actions = config.envs, NUM_JOINTS
         self.max_episode_length = max(e.simulated.frames for e in episodes)
         self.episode_length_buf = torch.zeros(config.envs, dtype=torch.long, device=self.device)
 
-    def _draw(self) -> tuple[Episode, np.ndarray]:
-        lo, hi = self.config.scale_range
-        return self.episodes[self.rng.integers(len(self.episodes))], self.rng.uniform(lo, hi, 3)
+    def _draw(self) -> tuple[Episode, tuple, Variation]:
+        v = draw(self.config.randomization, self.rng)
+        return self.episodes[self.rng.integers(len(self.episodes))], v.scale, v
+
+    def _seen(self, obs: Obs) -> Obs:
+        """What the policy sees: the DF features with the perception noise."""
+        return replace(obs, df=perception_noise(obs.df, self.config.randomization.df_noise, self.rng))
 
     def _tensor(self, x: np.ndarray) -> torch.Tensor:
         return torch.as_tensor(x, dtype=torch.float32, device=self.device)
@@ -104,21 +113,23 @@ class PostTrainEnv(VecEnv):
     def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
         """Step every environment with raw joint targets ``actions`` (N, 29); restart the finished ones."""
         a = actions.detach().cpu().numpy().astype(np.float64)
-        last = np.stack([s.last_action for s in self.env.slots])
-        before = self.history.terms["proprio"][:, -1, AMP_STATE]
-        obs, done = self.env.step(a)
+        first = np.array([s.t == 0 for s in self.env.slots])
+        last = np.where(first[:, None], a, self.last_actions)
+        self.last_actions = a
+        before = self.env.observe().proprio[:, AMP_STATE]
+        obs, done = self.env.step(actuation_noise(a, self.config.randomization.action_noise_rad, self.rng))
         reward, means = task_rewards(self.env, a, last, self.config.weights)
         fell = np.array([s.fell for s in self.env.slots])
         style = {
             "df": self._tensor(obs.df),
             "transition": self._tensor(np.concatenate([before, obs.proprio[:, AMP_STATE]], axis=1)),
         }
-        self.history.push(obs)
+        self.history.push(self._seen(obs))
         self.episode_length_buf += 1
         if done.any():
             for i in np.flatnonzero(done):
                 self.env.reset_one(i, *self._draw())
-            self.history.reset(self.env.observe(), which=done)
+            self.history.reset(self._seen(self.env.observe()), which=done)
             self.episode_length_buf[torch.as_tensor(done, device=self.device)] = 0
         extras = {
             "time_outs": torch.as_tensor(done & ~fell, device=self.device),

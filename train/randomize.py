@@ -1,0 +1,159 @@
+"""The six domain randomisations of post-training (paper App. "Domain Randomization"), as plain functions over one
+episode's draw (:class:`Variation`) or a batch of arrays. The paper names the dimensions, not the ranges; the ranges
+in :class:`RandomizationConfig` are ours, each small against what the BC + DAgger policy already tolerates, and a
+range of 0 (or a factor range of (1, 1)) switches one off:
+
+1. **object geometry**: a per-axis scale (the ``scale`` of the episode draw, 0.4-1.6 as the evaluation's), a box
+   drawn as a cylinder of the same height and mean half-width with ``cylinder_prob`` (primitive boxes only);
+2. **physical properties**: the object's mass and friction times a factor, a restitution coefficient
+   (:func:`object_physics`; the scene builder turns restitution into a contact spring);
+3. **initial conditions**: the robot's root and the objects shifted in x, y and turned about z, the joints moved
+   around the episode's first (standing) pose (:func:`perturb_initial_state`); the placement perturbation of the
+   paper's "object geometry" is this one's object offset;
+4. **command perturbation**: the episode's root command target shifted and turned by a per-episode offset
+   (:func:`perturb_command`);
+5. **actuation noise**: zero-mean Gaussian noise on the joint targets before they are applied
+   (:func:`actuation_noise`);
+6. **perception noise**: zero-mean Gaussian noise on the DF features the policy reads (phi, its gradient, the two
+   velocities), not on what the AIP discriminator reads (:func:`perception_noise`).
+
+(1), (2), (3) and (4) are drawn once per episode (:func:`draw`); (5) and (6) every step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pipeline.clip import ObjectTrack
+from pipeline.geometry import ObjectPhysics, Primitive
+from pipeline.robot import NQ_ROBOT, NUM_JOINTS
+
+
+@dataclass(frozen=True)
+class RandomizationConfig:
+    """The ranges (module docstring). Offsets are uniform in ``+-range``; factors uniform in ``(lo, hi)``."""
+
+    scale: tuple[float, float] = (0.4, 1.6)
+    cylinder_prob: float = 0.5
+    mass_factor: tuple[float, float] = (0.5, 1.5)
+    friction_factor: tuple[float, float] = (0.6, 1.25)
+    restitution: tuple[float, float] = (0.0, 0.3)
+    robot_xy_m: float = 0.03
+    robot_yaw_rad: float = 0.05
+    joint_noise_rad: float = 0.03
+    object_xy_m: float = 0.03
+    object_yaw_rad: float = 0.1
+    command_xy_m: float = 0.05
+    command_yaw_rad: float = 0.05
+    action_noise_rad: float = 0.02
+    df_noise: tuple[float, float, float] = (0.005, 0.02, 0.02)  # phi [m], grad [1], velocities [m/s]
+
+    @classmethod
+    def off(cls) -> RandomizationConfig:
+        """No randomisation at all (the ``-Rand`` ablation): scale 1.0, nothing perturbed."""
+        ranges = {"scale": (1.0, 1.0), "mass_factor": (1.0, 1.0), "friction_factor": (1.0, 1.0)}
+        ranges |= {"restitution": (0.0, 0.0), "df_noise": (0.0, 0.0, 0.0)}
+        return cls(**{f.name: ranges.get(f.name, 0.0) for f in fields(cls)})
+
+
+@dataclass(frozen=True)
+class Variation:
+    """One episode's draw: ``scale`` (3,), ``cylinder``, the physical factors and restitution, the ``(dx, dy, dyaw)``
+    offsets of the robot, the objects and the command, and the ``joint_noise`` (29,)."""
+
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    cylinder: bool = False
+    mass_factor: float = 1.0
+    friction_factor: float = 1.0
+    restitution: float = 0.0
+    robot_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    object_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    command_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    joint_noise: tuple[float, ...] = (0.0,) * NUM_JOINTS
+
+
+def draw(cfg: RandomizationConfig, rng: np.random.Generator) -> Variation:
+    """One episode's :class:`Variation` under ``cfg``."""
+
+    def offset(xy: float, yaw: float) -> tuple[float, float, float]:
+        return tuple(float(v) for v in rng.uniform(-1, 1, 3) * (xy, xy, yaw))
+
+    return Variation(
+        scale=tuple(float(v) for v in rng.uniform(*cfg.scale, 3)),
+        cylinder=bool(rng.random() < cfg.cylinder_prob),
+        mass_factor=float(rng.uniform(*cfg.mass_factor)),
+        friction_factor=float(rng.uniform(*cfg.friction_factor)),
+        restitution=float(rng.uniform(*cfg.restitution)),
+        robot_offset=offset(cfg.robot_xy_m, cfg.robot_yaw_rad),
+        object_offset=offset(cfg.object_xy_m, cfg.object_yaw_rad),
+        command_offset=offset(cfg.command_xy_m, cfg.command_yaw_rad),
+        joint_noise=tuple(float(v) for v in rng.uniform(-1, 1, NUM_JOINTS) * cfg.joint_noise_rad),
+    )
+
+
+def vary_shape(o: ObjectTrack, v: Variation) -> ObjectTrack:
+    """A primitive box drawn as a cylinder (z axis, radius the mean of the box's x and y half-extents, the same
+    half-height and scale) when ``v.cylinder``; any other object as it is."""
+    g = o.geometry
+    if not (v.cylinder and isinstance(g, Primitive) and g.kind == "box"):
+        return o
+    hx, hy, hz = g.size
+    return replace(o, geometry=Primitive("cylinder", ((hx + hy) / 2, hz), g.scale))
+
+
+def object_physics(o: ObjectTrack, v: Variation) -> ObjectPhysics:
+    """The object's own mass and friction times the draw's factors, with the draw's restitution."""
+    p = o.physics()
+    return ObjectPhysics(p.mass * v.mass_factor, p.friction * v.friction_factor, v.restitution)
+
+
+def placed(o: ObjectTrack, v: Variation) -> tuple[float, ...]:
+    """The object's first pose shifted and turned by ``v.object_offset`` (where a fixed object is built)."""
+    pose = np.array(o.pose[0], dtype=float)
+    _turn(pose, v.object_offset)
+    return tuple(pose)
+
+
+def _turn(qpos7: np.ndarray, offset: tuple[float, float, float]) -> None:
+    """Shift a free body's ``(x y z qw qx qy qz)`` in place by ``(dx, dy)`` and turn it by ``dyaw`` about z."""
+    dx, dy, dyaw = offset
+    qpos7[0] += dx
+    qpos7[1] += dy
+    if dyaw:
+        w, x, y, z = qpos7[3:7]
+        q = (Rotation.from_euler("z", dyaw) * Rotation.from_quat([x, y, z, w])).as_quat()
+        qpos7[3:7] = (q[3], q[0], q[1], q[2])
+
+
+def perturb_initial_state(qpos: np.ndarray, joint_range: np.ndarray, object_adr: list[int], v: Variation) -> None:
+    """In place on a scene's ``qpos``: the robot's root and each free object shifted and turned (about their own
+    origin), the joints moved by ``v.joint_noise`` and kept inside ``joint_range`` (29, 2)."""
+    _turn(qpos[:7], v.robot_offset)
+    q = qpos[7:NQ_ROBOT] + np.asarray(v.joint_noise)
+    qpos[7:NQ_ROBOT] = np.clip(q, joint_range[:, 0], joint_range[:, 1])
+    for adr in object_adr:
+        _turn(qpos[adr : adr + 7], v.object_offset)
+
+
+def perturb_command(target_qpos: np.ndarray, v: Variation) -> np.ndarray:
+    """The root command's target ``(x y z qw qx qy qz)`` shifted and turned by ``v.command_offset``."""
+    out = np.array(target_qpos[:7], dtype=float)
+    _turn(out, v.command_offset)
+    return out
+
+
+def actuation_noise(actions: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
+    """``a + N(0, sigma^2)`` per joint target."""
+    return actions + rng.normal(0.0, sigma, actions.shape) if sigma > 0 else actions
+
+
+def perception_noise(df: np.ndarray, sigma: tuple[float, float, float], rng: np.random.Generator) -> np.ndarray:
+    """``u + N(0, s^2)`` on the DF features ``(N, K x 10)``, ``s`` per part of ``u = [phi, grad, v_norm, v_tan]``:
+    ``sigma[0]`` on phi, ``sigma[1]`` on the gradient, ``sigma[2]`` on both velocities."""
+    if not any(sigma):
+        return df
+    s = np.array([sigma[0]] + [sigma[1]] * 3 + [sigma[2]] * 6)
+    return df + rng.normal(0.0, 1.0, df.shape) * np.tile(s, df.shape[-1] // 10)
