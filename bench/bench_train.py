@@ -5,7 +5,11 @@
   4 substeps (no observation); the issue's bar: within 25% of raw. Per task scene and for ``--envs`` environments
   stepped in 1 and 2 threads (wall time then, both cores);
 * **teacher**: the QP teacher's cost per query (:meth:`train.teacher.Teacher.act`), tracking its episode;
-* **BC**: behaviour-cloning samples per second (:func:`train.bc.fit`) for the Transformer and the MLP policy.
+* **BC**: behaviour-cloning samples per second (:func:`train.bc.fit`) for the Transformer and the MLP policy;
+* **post-training**: PPO env steps per CPU-second (rollout and update together, :func:`train.aip.iteration`) for
+  plain PPO on the plain environment, with the six randomisations, and with both style priors (AIP + AMP) too;
+  the issue's bar: the randomisations and the discriminators together within 20% of the plain run. The policy is a
+  BC policy trained for a few steps on the corpus (the cost does not depend on its quality, only through falls).
 
 Run: ``make bench-train [NAME=corpus]`` (default: the default chain's datasets; built in a temporary folder when
 missing). Actions replay each episode's recorded actions, so the robots move as in the data.
@@ -103,6 +107,37 @@ def bc_table(name: str) -> None:
         print(f"BC {backbone}: {bc_speed(stage_dir(name, 'features'), backbone):.0f} samples/s (1 thread)")
 
 
+def post_training_table(name: str, envs: int, iterations: int = 4) -> None:
+    from dataclasses import replace
+
+    from train.aip import PostTrainConfig, build, iteration
+    from train.bc import BCConfig, train_bc
+    from train.policy import PolicyConfig
+    from train.post_env import PostEnvConfig
+    from train.vae import VAEConfig
+
+    run = tempfile.mkdtemp()
+    train_bc(stage_dir(name, "features"), run, BCConfig(steps=200), PolicyConfig(), VAEConfig(), vae_steps=200)
+    cfg = PostTrainConfig(steps_per_env=24, env=PostEnvConfig(envs=envs))
+    cases = [
+        ("plain PPO, plain env", replace(cfg, ablation="-Rand"), ()),
+        ("+ six randomisations", cfg, ()),
+        ("+ AIP + AMP priors", cfg, ("aip", "amp")),
+    ]
+    print(f"post-training, {envs} envs x 24 steps per PPO iteration, {iterations} iterations after one warm-up:")
+    base = None
+    for label, c, priors in cases:
+        env, alg = build(name, os.path.join(run, "policy.pt"), c, priors=priors)
+        obs, _ = iteration(env, alg, env.get_observations(), c.steps_per_env)  # warm-up
+        c0 = time.process_time()
+        for _ in range(iterations):
+            obs, _ = iteration(env, alg, obs, c.steps_per_env)
+        rate = iterations * c.steps_per_env * envs / (time.process_time() - c0)
+        base = base or rate
+        print(f"  {label:24s}{rate:8.0f} env steps/CPU-s   overhead {base / rate - 1:+6.1%}")
+        env.close()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--name", default="default")
@@ -122,6 +157,7 @@ def main() -> None:
     environment_table(one_per_task, args.envs)
     teacher_table(one_per_task)
     bc_table(args.name)
+    post_training_table(args.name, args.envs)
 
 
 if __name__ == "__main__":

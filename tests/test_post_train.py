@@ -38,7 +38,7 @@ def bc_policy(tmp_path_factory):
     mp.undo()
 
 
-SMOKE = PostTrainConfig(iterations=1, steps_per_env=6, env=PostEnvConfig(envs=2), disc_steps=2, disc_batch=16)
+SMOKE = PostTrainConfig(iterations=1, steps_per_env=6, env=PostEnvConfig(envs=2), disc_minibatches=2)
 
 
 def test_the_actor_starts_as_the_bc_policy_and_is_plugged_by_name(bc_policy):
@@ -80,6 +80,10 @@ def test_the_environment_restarts_episodes_and_hands_the_priors_their_inputs(bc_
     first = env.env.slots[0]
     env.step(hold)
     assert env.env.slots[0] is not first and env.episode_length_buf[0] == 0
+    for _ in range(3):  # every restart draws a new scale: the fields of the old ones are dropped
+        env.env.slots[0].done = True
+        env.step(hold)
+    assert set(env.env._fields) == set().union(*(s.field_keys for s in env.env.slots))
 
 
 def test_one_ppo_iteration_from_a_bc_checkpoint_trains_the_policy_and_both_priors(bc_policy, tmp_path):

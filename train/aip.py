@@ -68,7 +68,9 @@ class PPOConfig:
 @dataclass(frozen=True)
 class PostTrainConfig:
     """``iterations`` of ``steps_per_env`` steps in ``env.envs`` environments; ``init_std`` the actor's exploration
-    noise (rad); ``disc_steps`` discriminator minibatches of ``disc_batch`` per iteration; ``ablation`` one of
+    noise (rad); ``disc_minibatches``: each prior makes one pass per iteration over the iteration's policy samples
+    in that many minibatches, each against as many reference samples drawn at random (so its cost follows the
+    rollout's size, as PPO's own update does); ``ablation`` one of
     :data:`ABLATIONS` or empty."""
 
     iterations: int = 50
@@ -76,8 +78,7 @@ class PostTrainConfig:
     env: PostEnvConfig = field(default_factory=PostEnvConfig)
     ppo: PPOConfig = field(default_factory=PPOConfig)
     disc: DiscriminatorConfig = field(default_factory=DiscriminatorConfig)
-    disc_steps: int = 8
-    disc_batch: int = 256
+    disc_minibatches: int = 4
     init_std: float = 0.05
     ablation: str = ""
     seed: int = 0
@@ -96,7 +97,7 @@ class AdversarialPPO(PPO):
         super().__init__(actor, critic, storage, **ppo)
         self.priors, self.vae, self.weights = priors, vae, weights
         self.style_weight = {"aip": weights.interaction_style, "amp": weights.motion_style}
-        self.disc_steps, self.disc_batch = disc.disc_steps, disc.disc_batch
+        self.disc_minibatches = disc.disc_minibatches
         self.disc_optim = {k: torch.optim.Adam(d.parameters(), lr=d.config.lr) for k, (d, _) in priors.items()}
         self.samples: dict[str, list[torch.Tensor]] = {k: [] for k in priors}
         self.style_rewards: dict[str, float] = {}
@@ -120,10 +121,9 @@ class AdversarialPPO(PPO):
         for name, (disc, reference) in self.priors.items():
             policy = torch.cat(self.samples[name]).clone()  # out of inference mode
             self.samples[name] = []
-            for _ in range(self.disc_steps):
-                pol = policy[torch.randint(len(policy), (self.disc_batch,))]
-                ref = reference[torch.randint(len(reference), (self.disc_batch,))]
-                loss, parts = disc.loss(ref, pol)
+            for rows in torch.randperm(len(policy)).chunk(self.disc_minibatches):
+                ref = reference[torch.randint(len(reference), (len(rows),))]
+                loss, parts = disc.loss(ref, policy[rows])
                 self.disc_optim[name].zero_grad()
                 loss.backward()
                 self.disc_optim[name].step()
@@ -164,12 +164,10 @@ def _save_state(alg: AdversarialPPO, iteration: int, path: Path) -> None:
     write_bytes_atomic(path, buf.getvalue())
 
 
-def post_train(name: str, policy_path: str | Path, out_dir: str | Path, config: PostTrainConfig = PostTrainConfig(),
-               device: str = "cpu") -> dict:  # fmt: skip
-    """Post-train the policy at ``policy_path`` on corpus ``name`` into ``out_dir`` (module docstring); resumes after
-    the last finished iteration. Returns the last log row."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+def build(name: str, policy_path: str | Path, config: PostTrainConfig, device: str = "cpu",
+          priors: tuple[str, ...] = ("aip", "amp")) -> tuple[PostTrainEnv, AdversarialPPO]:  # fmt: skip
+    """The environment and the algorithm of :func:`post_train` (module docstring, step 3) with the style ``priors``
+    named (none: plain PPO); ``config.ablation`` "-Rand" switches the randomisations off."""
     torch.manual_seed(config.seed)
     env_cfg = replace(config.env, seed=config.seed)
     if config.ablation == "-Rand":
@@ -181,48 +179,63 @@ def post_train(name: str, policy_path: str | Path, out_dir: str | Path, config: 
     critic = MLPModel(obs, groups, "critic", 1, hidden_dims=(256, 256, 128), activation="elu", obs_normalization=True)
     storage = RolloutStorage("rl", env.num_envs, config.steps_per_env, obs, [env.num_actions], device)
     vae = actor.policy.vae
-    refs = reference_buffers(name, vae)
-    priors = {k: (Discriminator(refs[k], config.disc).to(device), refs[k].to(device)) for k in ("aip", "amp")}
-    if config.ablation == "-AIP":
-        priors.pop("aip")
-    alg = AdversarialPPO(actor, critic, storage, priors=priors, vae=vae, weights=env_cfg.weights, disc=config,
+    refs = reference_buffers(name, vae) if priors else {}
+    discs = {k: (Discriminator(refs[k], config.disc).to(device), refs[k].to(device)) for k in priors}
+    alg = AdversarialPPO(actor, critic, storage, priors=discs, vae=vae, weights=env_cfg.weights, disc=config,
                          device=device, **asdict(config.ppo))  # fmt: skip
+    return env, alg
+
+
+def iteration(env: PostTrainEnv, alg: AdversarialPPO, obs, steps: int) -> tuple[object, dict]:
+    """One PPO iteration: ``steps`` rollout steps in every environment, the returns, the update. The next
+    observation and the iteration's figures (task reward, falls, the reward terms' means, the losses)."""
+    alg.train_mode()
+    returns, falls, logs = [], 0, []
+    with torch.inference_mode():
+        for _ in range(steps):
+            obs, reward, done, extras = env.step(alg.act(obs))
+            alg.process_env_step(obs, reward, done, extras)
+            returns.append(float(reward.mean()))
+            falls += int((done & ~extras["time_outs"]).sum())
+            logs.append(extras["log"])
+        alg.compute_returns(obs)
+    losses = alg.update()
+    figures = {
+        "task_reward": float(np.mean(returns)),
+        "falls": falls,
+        **{k.strip("/").replace("/", "."): float(np.mean([g[k] for g in logs])) for k in logs[0]},
+        **losses,
+        "learning_rate": alg.learning_rate,
+        "action_std": float(alg.actor.distribution.log_std_param.detach().exp().mean()),
+    }
+    return obs, figures
+
+
+def post_train(name: str, policy_path: str | Path, out_dir: str | Path, config: PostTrainConfig = PostTrainConfig(),
+               device: str = "cpu") -> dict:  # fmt: skip
+    """Post-train the policy at ``policy_path`` on corpus ``name`` into ``out_dir`` (module docstring); resumes after
+    the last finished iteration. Returns the last log row."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    priors = ("amp",) if config.ablation == "-AIP" else ("aip", "amp")
+    env, alg = build(name, policy_path, config, device, priors)
     state_path, log_path = out_dir / "post_state.pt", out_dir / "post_log.jsonl"
     start = 0
     if state_path.is_file():
         state = torch.load(state_path, map_location=device, weights_only=False)
         alg.load(state, None, strict=True)
-        for k, (d, _) in priors.items():
+        for k, (d, _) in alg.priors.items():
             d.load_state_dict(state["priors"][k])
             alg.disc_optim[k].load_state_dict(state["prior_optimizers"][k])
         torch.set_rng_state(state["torch_rng"])
         start = state["iteration"] + 1
-    row: dict = {}
+    obs, row = env.get_observations(), {}
     for it in tqdm(range(start, config.iterations), desc="post-train", unit="iteration"):
         t0 = time.perf_counter()
-        alg.train_mode()
-        returns, falls, logs = [], 0, []
-        with torch.inference_mode():
-            for _ in range(config.steps_per_env):
-                obs, reward, done, extras = env.step(alg.act(obs))
-                alg.process_env_step(obs, reward, done, extras)
-                returns.append(float(reward.mean()))
-                falls += int((done & ~extras["time_outs"]).sum())
-                logs.append(extras["log"])
-            alg.compute_returns(obs)
-        losses = alg.update()
-        row = {
-            "iteration": it,
-            "env_steps": (it + 1) * config.steps_per_env * env.num_envs,
-            "task_reward": float(np.mean(returns)),
-            "falls": falls,
-            **{k.strip("/").replace("/", "."): float(np.mean([g[k] for g in logs])) for k in logs[0]},
-            **losses,
-            "learning_rate": alg.learning_rate,
-            "action_std": float(actor.distribution.log_std_param.detach().exp().mean()),
-            "seconds": time.perf_counter() - t0,
-        }
-        save_policy(actor.policy, out_dir / "policy.pt", post_train_config=_jsonable(asdict(config)))
+        obs, figures = iteration(env, alg, obs, config.steps_per_env)
+        steps = (it + 1) * config.steps_per_env * env.num_envs
+        row = {"iteration": it, "env_steps": steps, **figures, "seconds": time.perf_counter() - t0}
+        save_policy(alg.actor.policy, out_dir / "policy.pt", post_train_config=_jsonable(asdict(config)))
         _save_state(alg, it, state_path)
         with log_path.open("a", encoding="utf-8") as f:
             f.write(json.dumps(row) + "\n")

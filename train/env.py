@@ -84,6 +84,7 @@ class _Slot:
         if key not in fields:  # one ObjectFields per object set: environments with the same objects share it
             fields[key] = ObjectFields(tuple(_field(fields, o) for o in self.objects))
         self.fields = fields[key]
+        self.field_keys = {key, *key}  # the cache entries this environment uses (InteractionEnv.reset_one prunes)
         self.command = command_frames(sim.frames, sim.robot.fps, cfg.root_horizon_s)
         torso = link_motion(sim.robot.qpos, sim.qvel, ("torso_link",)).rot[:, 0]
         self.ref_torso_quat = np.array([_mat_quat(R) for R in torso])
@@ -112,6 +113,7 @@ class _Slot:
             free = list(self.scene.object_qpos_adr.values())
             R.perturb_initial_state(self.data.qpos, m.jnt_range[1 : 1 + NUM_JOINTS], free, variation)
             mujoco.mj_forward(m, self.data)
+        self.last_facts = self.facts(0)
 
     def set_state(self, qpos: np.ndarray, qvel: np.ndarray, objects: np.ndarray | None = None) -> None:
         """The robot at ``(qpos, qvel)``; the objects at ``objects`` (nq - 36), else their track at ``t``, at rest."""
@@ -215,7 +217,12 @@ class InteractionEnv:
         return self.observe()
 
     def reset_one(self, i: int, episode: Episode, scale, variation: Variation | None = None) -> None:
+        """Restart environment ``i``; the distance fields no environment uses any more are dropped (with a scale
+        or a shape drawn per episode, each restart makes new ones: the cache would grow without end)."""
         self.slots[i] = _Slot(episode, scale, self.cfg, self._fields, variation)
+        used = set().union(*(s.field_keys for s in self.slots))
+        for key in [k for k in self._fields if k not in used]:
+            del self._fields[key]
 
     def step(self, actions: np.ndarray) -> tuple[Obs, np.ndarray]:
         """Apply ``actions`` (N, 29) to the running environments (finished ones stand still); ``(obs, done)``."""
