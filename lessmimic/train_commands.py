@@ -62,8 +62,17 @@ def _cmd_eval(a: argparse.Namespace) -> int:
     if not results:
         raise InputError(None, "--policy", "nothing to evaluate: pass --policy and/or --teacher")
     out = Path(a.out) if a.out else (Path(a.policy).parent / "eval" if a.policy else Path("runs") / "eval")
-    print(write(results, out, scale_note(a.name, cfg, a.policy)))
+    note = scale_note(a.name, cfg, a.policy)
+    print(write(results, out, note))
     print(markdown(results))
+    if a.chains and a.policy:
+        from train import chains
+
+        lengths = tuple(int(n) for n in a.chains.split(","))
+        ccfg = chains.ChainConfig(lengths=lengths, seeds=cfg.seeds, chains=a.chains_per_seed, envs=a.envs)
+        result = chains.evaluate_chains(PolicyActor(policy), episodes, ccfg, f"policy ({Path(a.policy).parent.name})")
+        print(chains.write(result, out, note))
+        print(chains.markdown(result))
     return 0
 
 
@@ -146,5 +155,9 @@ def add_train(sub) -> None:
     p.add_argument("--episodes", type=int, default=4, help="episodes per cell and seed (default 4)")
     p.add_argument("--envs", type=int, default=8)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument(
+        "--chains", default="", help="also the long-horizon chains of the policy (Table 3), e.g. 5,10 (lengths)"
+    )
+    p.add_argument("--chains-per-seed", type=int, default=4, help="chains per length and seed (default 4)")
     p.add_argument("--out", default=None, help="output folder (default: the policy's run folder /eval)")
     p.set_defaults(func=_cmd_eval)

@@ -1,0 +1,103 @@
+"""Long-horizon chains (train.chains) on the default corpus: real datasets, a BC policy trained briefly, real MuJoCo."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from features.stage import run_stage as features_stage
+from physicalize.stage import run_stage as physicalize_stage
+from pipeline.stage.paths import stage_dir
+from retarget.stage import run_stage as retarget_stage
+from train.actors import PolicyActor
+from train.bc import BCConfig, train_bc
+from train.chains import ENDINGS, ChainConfig, evaluate_chains, markdown, relocated, run_chains
+from train.chains import _yaw as heading_yaw
+from train.env import InteractionEnv
+from train.episodes import load_episodes
+from train.policy import PolicyConfig, load_policy
+from train.vae import VAEConfig
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory):
+    root, run = tmp_path_factory.mktemp("datasets"), tmp_path_factory.mktemp("run")
+    mp = pytest.MonkeyPatch()
+    mp.setenv("LESSMIMIC_DATASETS", str(root))
+    retarget_stage(None, "train")
+    physicalize_stage("train")
+    features_stage("train")
+    train_bc(stage_dir("train", "features"), run, BCConfig(steps=30, log_every=10), PolicyConfig(), VAEConfig(),
+             vae_steps=30)  # fmt: skip
+    yield load_episodes("train"), run / "policy.pt"
+    mp.undo()
+
+
+def _yaw(wxyz) -> float:
+    return float(Rotation.from_quat(np.asarray(wxyz)[[1, 2, 3, 0]]).as_euler("ZYX")[0])
+
+
+def test_a_relocated_episode_starts_where_asked_and_keeps_its_object_where_it_was_relative_to_the_robot(corpus):
+    episodes, _ = corpus
+    e = next(x for x in episodes if x.task == "PickUp")
+    r = relocated(e, 1.5, -2.0, 1.0)
+    q, q0 = r.simulated.robot.qpos, e.simulated.robot.qpos
+    np.testing.assert_allclose(q[0, :2], [1.5, -2.0], atol=1e-9)
+    assert heading_yaw(q[0]) == pytest.approx(1.0, abs=1e-9)
+    np.testing.assert_allclose(np.diff([_yaw(x) for x in q[:, 3:7]]), np.diff([_yaw(x) for x in q0[:, 3:7]]), atol=1e-9)
+    np.testing.assert_array_equal(q[:, 2], q0[:, 2])
+    np.testing.assert_array_equal(q[:, 7:], q0[:, 7:])  # joint angles unchanged
+    for new, old in ((r.simulated.robot.objects[0].pose, e.simulated.robot.objects[0].pose),):
+        d_new = np.linalg.norm(new[:, :2] - q[:, :2], axis=1)
+        d_old = np.linalg.norm(old[:, :2] - q0[:, :2], axis=1)
+        np.testing.assert_allclose(d_new, d_old, atol=1e-9)  # a rigid motion of the whole scene
+    speed = np.linalg.norm(r.simulated.qvel[:, :3], axis=1)
+    np.testing.assert_allclose(speed, np.linalg.norm(e.simulated.qvel[:, :3], axis=1), atol=1e-9)
+    gap = np.linalg.norm(r.reference.qpos[:, :2] - q[:, :2], axis=1)  # the reference moved with it
+    np.testing.assert_allclose(gap, np.linalg.norm(e.reference.qpos[:, :2] - q0[:, :2], axis=1), atol=1e-9)
+
+
+def test_a_chain_goes_on_from_the_robots_state_into_the_next_task(corpus):
+    """Switching to the next task keeps the robot's state and places the next episode where the robot stands."""
+    from train.chains import _switch
+
+    episodes, policy = corpus
+    pick, sit = (next(x for x in episodes if x.task == t) for t in ("PickUp", "SitStand"))
+    env = InteractionEnv()
+    env.reset([(pick, 1.0)])
+    actor = PolicyActor(load_policy(policy))
+    actor.reset(env)
+    for _ in range(5):
+        actor.observe(env.step(actor.act(env))[0])
+    q = env.slots[0].data.qpos[:36].copy()
+    _switch(env, actor, 0, sit)
+    slot = env.slots[0]
+    assert slot.episode.task == "SitStand" and slot.t == 0
+    np.testing.assert_array_equal(slot.data.qpos[:36], q)
+    np.testing.assert_allclose(slot.episode.simulated.robot.qpos[0, :2], q[:2], atol=1e-9)
+    np.testing.assert_allclose(actor.history.terms["proprio"][0, -1], env.observe().proprio[0])
+
+
+def test_chain_results_per_length_say_how_each_chain_ended(corpus):
+    episodes, policy = corpus
+    cfg = ChainConfig(lengths=(1, 2), seeds=(0, 1), chains=2, envs=2)
+    result = evaluate_chains(PolicyActor(load_policy(policy)), episodes, cfg, "smoke")
+    for n in ("1", "2"):
+        c = result["lengths"][n]
+        assert sum(c["ended"].values()) == 4 and set(c["ended"]) == set(ENDINGS)
+        assert 0 <= c["mean"] <= 1 and 0 <= c["mean_tasks_completed"] <= int(n) and len(c["per_seed"]) == 2
+    assert "| smoke |" in markdown(result) and "N = 2" in markdown(result)
+    outcome = run_chains(PolicyActor(load_policy(policy)), [[episodes[0]]], cfg)
+    assert outcome[0]["tasks_completed"] == int(outcome[0]["success"])
+
+
+def test_the_eval_command_adds_the_chains_table(corpus, tmp_path):
+    import json
+
+    from lessmimic.cli import main
+
+    _, policy = corpus
+    args = ["eval", "--name", "train", "--policy", str(policy), "--seeds", "0", "--episodes", "1", "--envs", "4"]
+    assert main([*args, "--chains", "1,2", "--chains-per-seed", "2", "--out", str(tmp_path)]) == 0
+    saved = json.loads((tmp_path / "chains.json").read_text())
+    assert list(saved["result"]["lengths"]) == ["1", "2"] and saved["scale"]["policy"]["checkpoint"] == str(policy)
+    assert "Chains: 2 per length and seed, seeds 0" in (tmp_path / "chains.md").read_text()
