@@ -116,7 +116,7 @@ class PostTrainEnv(VecEnv):
         first = np.array([s.t == 0 for s in self.env.slots])
         last = np.where(first[:, None], a, self.last_actions)
         self.last_actions = a
-        before = self.env.observe().proprio[:, AMP_STATE]
+        before = self.history.terms["proprio"][:, -1, AMP_STATE].copy()  # proprio carries no perception noise
         obs, done = self.env.step(actuation_noise(a, self.config.randomization.action_noise_rad, self.rng))
         reward, means = task_rewards(self.env, a, last, self.config.weights)
         fell = np.array([s.fell for s in self.env.slots])
