@@ -90,6 +90,7 @@ AIP_ARGS ?=
 train-aip: install
 	$(CLI) train-aip --name $(CORPUS) --run runs/$(RUN) $(if $(ABLATION),--ablation=$(ABLATION)) $(AIP_ARGS)
 
+# EVAL_ARGS="--chains 5,10" adds the long-horizon chains (Table 3) of the policy; "--episodes 8" more per cell.
 POLICY ?= runs/$(RUN)/policy.pt
 EVAL_ARGS ?=
 eval: install

@@ -54,7 +54,7 @@ class InteractionActor(MLPModel):
         obs_set: str,
         output_dim: int,
         policy_path: str,
-        init_std: float = 0.05,
+        init_std: float = 0.1,
     ) -> None:
         nn.Module.__init__(self)
         self.policy: InteractionPolicy = load_policy(policy_path)
