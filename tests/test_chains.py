@@ -4,32 +4,16 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from features.stage import run_stage as features_stage
-from physicalize.stage import run_stage as physicalize_stage
-from pipeline.stage.paths import stage_dir
-from retarget.stage import run_stage as retarget_stage
 from train.actors import PolicyActor
-from train.bc import BCConfig, train_bc
 from train.chains import ENDINGS, ChainConfig, evaluate_chains, markdown, relocated, run_chains
 from train.chains import _yaw as heading_yaw
 from train.env import InteractionEnv
-from train.episodes import load_episodes
-from train.policy import PolicyConfig, load_policy
-from train.vae import VAEConfig
+from train.policy import load_policy
 
 
 @pytest.fixture(scope="module")
-def corpus(tmp_path_factory):
-    root, run = tmp_path_factory.mktemp("datasets"), tmp_path_factory.mktemp("run")
-    mp = pytest.MonkeyPatch()
-    mp.setenv("LESSMIMIC_DATASETS", str(root))
-    retarget_stage(None, "train")
-    physicalize_stage("train")
-    features_stage("train")
-    train_bc(stage_dir("train", "features"), run, BCConfig(steps=30, log_every=10), PolicyConfig(), VAEConfig(),
-             vae_steps=30)  # fmt: skip
-    yield load_episodes("train"), run / "policy.pt"
-    mp.undo()
+def corpus(bc_corpus):
+    return bc_corpus
 
 
 def _yaw(wxyz) -> float:

@@ -8,34 +8,18 @@ import numpy as np
 import pytest
 import torch
 
-from features.stage import run_stage as features_stage
-from physicalize.stage import run_stage as physicalize_stage
 from pipeline.errors import InputError
-from pipeline.stage.paths import stage_dir
-from retarget.stage import run_stage as retarget_stage
 from train.aip import PostTrainConfig, post_train, reference_buffers
-from train.bc import BCConfig, train_bc
 from train.episodes import load_episodes
-from train.policy import PolicyConfig, load_policy
+from train.policy import load_policy
 from train.post_env import AMP_STATE, PostEnvConfig, PostTrainEnv
 from train.rl_model import InteractionActor
-from train.vae import VAEConfig
 
 
 @pytest.fixture(scope="module")
-def bc_policy(tmp_path_factory):
-    """The default chain (4 synthetic clips) in a temporary datasets root, and a BC policy trained on it briefly."""
-    root = tmp_path_factory.mktemp("datasets")
-    run = tmp_path_factory.mktemp("run")
-    mp = pytest.MonkeyPatch()
-    mp.setenv("LESSMIMIC_DATASETS", str(root))
-    retarget_stage(None, "train")
-    physicalize_stage("train")
-    features_stage("train")
-    train_bc(stage_dir("train", "features"), run, BCConfig(steps=30, log_every=10), PolicyConfig(), VAEConfig(),
-             vae_steps=30)  # fmt: skip
-    yield run / "policy.pt"
-    mp.undo()
+def bc_policy(bc_corpus):
+    """The default corpus (``train``) and a BC policy trained on it briefly: the policy's path."""
+    return bc_corpus[1]
 
 
 SMOKE = PostTrainConfig(iterations=1, steps_per_env=6, env=PostEnvConfig(envs=2), disc_minibatches=2)
