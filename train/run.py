@@ -32,7 +32,7 @@ from train.vae import VAEConfig, split_episodes
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """A run's settings. The defaults are the laptop scale (~52 min on 2 CPU cores on the 100-clip corpus)."""
+    """A run's settings. The defaults are the laptop scale (~55 min on 2 CPU cores on the 100-clip corpus)."""
 
     name: str = "corpus"  # the corpus: datasets/<name>/{features,physicalized,retargeted}
     backbone: str = "transformer"
