@@ -105,11 +105,12 @@ class AdversarialPPO(PPO):
         self.disc_minibatches = disc.disc_minibatches
         self.disc_optim = {k: torch.optim.Adam(d.parameters(), lr=d.config.lr) for k, (d, _) in priors.items()}
         self.samples: dict[str, list[torch.Tensor]] = {k: [] for k in priors}
-        self.style_rewards: dict[str, float] = {}
+        self.style_rewards: dict[str, list[float]] = {k: [] for k in priors}  # per step, for the log
 
     def style_inputs(self, style: dict) -> dict[str, torch.Tensor]:
         """What each prior reads from the environment's ``extras["style"]``."""
-        return {"aip": self.vae.encode(style["df"]), "amp": style["transition"]}
+        read = {"aip": lambda: self.vae.encode(style["df"]), "amp": lambda: style["transition"]}
+        return {k: read[k]() for k in self.priors}
 
     def process_env_step(self, obs, rewards, dones, extras) -> None:
         inputs = self.style_inputs(extras["style"])
@@ -118,7 +119,7 @@ class AdversarialPPO(PPO):
             r = lsgan_reward(disc(inputs[name]))
             total += self.style_weight[name] * r
             self.samples[name].append(inputs[name])
-            self.style_rewards[name] = float(r.mean())
+            self.style_rewards[name].append(float(r.mean()))
         super().process_env_step(obs, total, dones, extras)
 
     def update(self) -> dict[str, float]:
@@ -133,7 +134,8 @@ class AdversarialPPO(PPO):
                 loss.backward()
                 self.disc_optim[name].step()
             losses |= {f"{name}_{k}": v for k, v in parts.items()}
-            losses[f"{name}_reward"] = self.style_rewards.get(name, 0.0)
+            losses[f"{name}_reward"] = float(np.mean(self.style_rewards[name]))  # over the iteration's steps
+            self.style_rewards[name] = []
         return losses
 
 
