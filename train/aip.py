@@ -95,14 +95,14 @@ class PostTrainConfig:
 
 class AdversarialPPO(PPO):
     """PPO whose reward gains the style priors' rewards and whose update also trains the priors (module docstring).
-    ``priors`` maps ``"aip"`` / ``"amp"`` to ``(discriminator, reference buffer)``; ``vae`` encodes the AIP's z."""
+    ``priors`` maps ``"aip"`` / ``"amp"`` to ``(discriminator, reference buffer)``; ``vae`` encodes the AIP's z;
+    ``disc_minibatches`` per prior and iteration (:class:`PostTrainConfig`)."""
 
     def __init__(self, actor, critic, storage, *, priors: dict, vae: DFVAE, weights: RewardWeights,
-                 disc: PostTrainConfig, **ppo) -> None:  # fmt: skip
+                 disc_minibatches: int, **ppo) -> None:  # fmt: skip
         super().__init__(actor, critic, storage, **ppo)
-        self.priors, self.vae, self.weights = priors, vae, weights
+        self.priors, self.vae, self.disc_minibatches = priors, vae, disc_minibatches
         self.style_weight = {"aip": weights.interaction_style, "amp": weights.motion_style}
-        self.disc_minibatches = disc.disc_minibatches
         self.disc_optim = {k: torch.optim.Adam(d.parameters(), lr=d.config.lr) for k, (d, _) in priors.items()}
         self.samples: dict[str, list[torch.Tensor]] = {k: [] for k in priors}
         self.style_rewards: dict[str, list[float]] = {k: [] for k in priors}  # per step, for the log
@@ -188,8 +188,8 @@ def build(name: str, policy_path: str | Path, config: PostTrainConfig, device: s
     vae = actor.policy.vae
     refs = reference_buffers(name, vae) if priors else {}
     discs = {k: (Discriminator(refs[k], config.disc).to(device), refs[k].to(device)) for k in priors}
-    alg = AdversarialPPO(actor, critic, storage, priors=discs, vae=vae, weights=env_cfg.weights, disc=config,
-                         device=device, **asdict(config.ppo))  # fmt: skip
+    alg = AdversarialPPO(actor, critic, storage, priors=discs, vae=vae, weights=env_cfg.weights,
+                         disc_minibatches=config.disc_minibatches, device=device, **asdict(config.ppo))  # fmt: skip
     return env, alg
 
 

@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
+from pipeline.rotations import rotation_from_wxyz, xyzw_to_wxyz
 from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
 from pipeline.terms.observations import heading
 from train.env import InteractionEnv
@@ -47,8 +48,7 @@ def _moved(pose: np.ndarray, turn: Rotation, shift: np.ndarray) -> np.ndarray:
     out = np.array(pose, dtype=float)
     flat = np.column_stack([out[:, :2], np.zeros(len(out))])
     out[:, :2] = turn.apply(flat)[:, :2] + shift  # heights unchanged
-    q = (turn * Rotation.from_quat(out[:, [4, 5, 6, 3]])).as_quat()
-    out[:, 3:7] = q[:, [3, 0, 1, 2]]
+    out[:, 3:7] = xyzw_to_wxyz((turn * rotation_from_wxyz(out[:, 3:7])).as_quat())
     return out
 
 
@@ -86,7 +86,6 @@ def _switch(env: InteractionEnv, actor, i: int, nxt: Episode) -> None:
     slot = env.slots[i]
     slot.set_state(q, v)
     slot.last_action = last
-    slot.last_facts = slot.facts(0)
     fresh = env.observe()
     for key, value in vars(fresh).items():
         actor.history.terms[key][i, -1] = value[i]

@@ -30,6 +30,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.clip import ObjectTrack
 from pipeline.geometry import ObjectPhysics, Primitive
 from pipeline.robot import NQ_ROBOT, NUM_JOINTS
+from pipeline.rotations import rotation_from_wxyz, xyzw_to_wxyz
 
 
 @dataclass(frozen=True)
@@ -123,9 +124,7 @@ def _turn(qpos7: np.ndarray, offset: tuple[float, float, float]) -> None:
     qpos7[0] += dx
     qpos7[1] += dy
     if dyaw:
-        w, x, y, z = qpos7[3:7]
-        q = (Rotation.from_euler("z", dyaw) * Rotation.from_quat([x, y, z, w])).as_quat()
-        qpos7[3:7] = (q[3], q[0], q[1], q[2])
+        qpos7[3:7] = xyzw_to_wxyz((Rotation.from_euler("z", dyaw) * rotation_from_wxyz(qpos7[3:7])).as_quat())[0]
 
 
 def perturb_initial_state(qpos: np.ndarray, joint_range: np.ndarray, object_adr: list[int], v: Variation) -> None:
