@@ -26,7 +26,7 @@ from pipeline.clip import RobotClip
 from pipeline.errors import InputError
 from pipeline.robot import FREE_NQ, NQ_ROBOT
 
-TEACHERS = ("base", "base+residual:<checkpoint>")
+TEACHERS = ("base", "base+residual:<checkpoint>", "kinematic")
 REPLAY_TOL_M = 1e-6
 
 
@@ -41,10 +41,11 @@ class TeacherSpec:
 
 
 def parse_teacher(teacher: str) -> TeacherSpec:
-    """``base`` or ``base+residual:<checkpoint path>``; anything else, or a checkpoint that is not a
-    file, is an :class:`InputError` (one line naming the teacher or the path)."""
-    if teacher == "base":
-        return TeacherSpec("base")
+    """``base``, ``base+residual:<checkpoint path>`` or ``kinematic`` (no physics: :mod:`physicalize.kinematic`);
+    anything else, or a checkpoint that is not a file, is an :class:`InputError` (one line naming the teacher or
+    the path)."""
+    if teacher in ("base", "kinematic"):
+        return TeacherSpec(teacher)
     prefix = "base+residual:"
     if not teacher.startswith(prefix) or not teacher[len(prefix) :]:
         raise InputError(teacher, "--teacher", f"unknown teacher; available: {', '.join(TEACHERS)}")
@@ -195,7 +196,7 @@ def physicalize_clip(
     robot = _simulated_clip(
         clip, scene, roll, "lessmimic-wbc" + ("+residual" if residual is not None else ""), provenance
     )
-    return robot, roll, figures, _com_series(clip, scene, ref, zmp, roll)
+    return robot, roll, figures, com_series(clip, scene, ref, zmp, roll)
 
 
 def _simulated_clip(clip: RobotClip, scene, roll: Rollout, method: str, provenance: dict) -> RobotClip:
@@ -222,7 +223,7 @@ def _simulated_clip(clip: RobotClip, scene, roll: Rollout, method: str, provenan
     )
 
 
-def _com_series(clip: RobotClip, scene, ref, zmp, roll: Rollout) -> dict:
+def com_series(clip: RobotClip, scene, ref, zmp, roll: Rollout) -> dict:
     """Reference, planned and simulated CoM, planned ZMP, pelvis heights and the support box: the clip's plot."""
     T = roll.frames
     return {

@@ -21,6 +21,7 @@ import numpy as np
 from tqdm import tqdm
 
 from physicalize.clip import TeacherSpec, load_residual, parse_teacher, physicalize_clip
+from physicalize.kinematic import kinematic_clip
 from physicalize.plot import plot_physicalized
 from physicalize.rollout import Rollout
 from physicalize.validate import summarise
@@ -53,8 +54,9 @@ class ClipResult:
 def physicalize_one(item: tuple[int, RobotClip], teacher: str = "base", profile: str = "mjlab") -> ClipResult:
     """:func:`physicalize_clip` of the ``(index, clip)`` item; a clip that raises is invalid, with its error."""
     index, clip = item
+    run = kinematic_clip if teacher == "kinematic" else partial(physicalize_clip, teacher=teacher)
     try:
-        robot, roll, figures, com = physicalize_clip(clip, profile=profile, teacher=teacher)
+        robot, roll, figures, com = run(clip, profile=profile)
     except Exception as exc:  # noqa: BLE001 - a clip that cannot be simulated is reported, the batch goes on
         reason = f"error: {type(exc).__name__}: {exc}"
         return ClipResult(index, clip.source, None, None, {"valid": False, "reason": reason, "failure": "error"}, {})
@@ -160,6 +162,8 @@ def _report(
 
 
 def _card(name: str, kept: list[ClipResult], src: Path, spec: TeacherSpec, teacher: str, prof, features) -> DatasetCard:
+    if teacher == "kinematic":
+        return _kinematic_card(name, kept, src, prof, features)
     teacher_note = f"Teacher: `{teacher}`" + (
         f" (checkpoint sha256 {spec.digest}): the base QP controller's joint targets plus a learned "
         "residual (PPO, physicalize.residual), used deterministically (mean action)."
@@ -182,6 +186,32 @@ def _card(name: str, kept: list[ClipResult], src: Path, spec: TeacherSpec, teach
         license="apache-2.0" if synthetic else "other",
         feature_frames={f.name: "world, z-up" if f.name.startswith("object") else "" for f in features},
         notes=CARD_NOTES + [teacher_note, objects_note([r.robot for r in kept])],
+    )
+
+
+def _kinematic_card(name: str, kept: list[ClipResult], src: Path, prof, features) -> DatasetCard:
+    synthetic = any(r.robot.provenance.get("synthetic") for r in kept)
+    return DatasetCard(
+        title=f"{name}: G1 retargeted motion in the physicalized layout (NOT simulated: the -Syn ablation)",
+        description=("SYNTHETIC demonstrations: " if synthetic else "")
+        + "retargeted G1 motion as it is, with finite-difference velocities and the next frame's joints as the "
+        "action (teacher `kinematic`); nothing is simulated. Every episode carries the physics figures measured on "
+        "its poses (`physics_valid`, `physics_reason`).",
+        provenance=[r.source for r in kept] + [str(src)],
+        fps=int(round(kept[0].robot.fps)),
+        synthetic=synthetic,
+        stage="physicalized",
+        actuator_profile=f"{prof.name}: {prof.description}",
+        license="apache-2.0" if synthetic else "other",
+        feature_frames={f.name: "world, z-up" if f.name.startswith("object") else "" for f in features},
+        notes=[
+            "Teacher `kinematic` (physicalize.kinematic): the data of LessMimic's 'Ours - Syn.' ablation (raw "
+            "retargeted mocap instead of physicalized data). `observation.state` is the retargeted qpos, "
+            "`observation.qvel` its central differences, `action` the next frame's joint positions, "
+            "`observation.torque` zero; `valid` is True for every clip and `physics_valid` says whether its poses "
+            "pass the simulated clips' bars.",
+            objects_note([r.robot for r in kept]),
+        ],
     )
 
 
