@@ -64,12 +64,16 @@ features: install
 # retarget ~2 min, physicalize ~7 min (91 clips valid), features ~20 s. Resumable like every stage (rerun the same
 # command after an interruption); another SEEDS over an existing corpus needs OVERWRITE=1. PROFILE=lessmimic_demo
 # physicalizes under the released demo's stiffer gains (81 clips valid; the policy trained on it acts for those gains).
+# ABLATION=-Syn builds the -Syn ablation's twin corpus datasets/$(CORPUS)-syn/: the same retargeted clips, not
+# physicalized (physicalize teacher `kinematic`: the motion as it is, its physics measured, every clip kept; ~3 min).
 CORPUS ?= corpus
 SEEDS ?= 0-24
-CORPUS_ARGS = --name $(CORPUS) $(if $(OVERWRITE),--overwrite) $(RUN_ARGS)
+ABLATION ?=
+SYN = $(filter -Syn,$(ABLATION))
+CORPUS_ARGS = --name $(CORPUS)$(if $(SYN),-syn) $(if $(OVERWRITE),--overwrite) $(RUN_ARGS)
 corpus: install
 	$(CLI) retarget $(CORPUS_ARGS) --input synthetic:$(SEEDS)
-	$(CLI) physicalize $(CORPUS_ARGS) --teacher $(TEACHER) --profile $(PROFILE) $(if $(KEEP_INVALID),--keep-invalid)
+	$(CLI) physicalize $(CORPUS_ARGS) --teacher $(if $(SYN),kinematic,$(TEACHER)) --profile $(PROFILE) $(if $(KEEP_INVALID),--keep-invalid)
 	$(CLI) features $(CORPUS_ARGS)
 
 # Train I (paper Sec. III-B): the DF VAE, behaviour cloning on the corpus, DAgger from the QP teacher, into runs/$(RUN)/.
@@ -80,12 +84,14 @@ corpus: install
 RUN ?= bc
 TRAIN_ARGS ?=
 train-bc: install
-	$(CLI) train-bc --name $(CORPUS) --run runs/$(RUN) $(if $(OVERWRITE),--overwrite) $(TRAIN_ARGS)
+	$(CLI) train-bc --name $(CORPUS) --run runs/$(RUN) $(if $(ABLATION),--ablation=$(ABLATION)) $(if $(OVERWRITE),--overwrite) $(TRAIN_ARGS)
 
 # Train II (paper Sec. III-C): PPO from runs/$(RUN)/policy.pt with the AIP and AMP style priors, objects scaled per
-# axis in 0.4-1.6, into runs/$(RUN)/aip$(ABLATION)/ (ABLATION=-AIP or -Rand); resumable. Score it with
-# `make eval POLICY=runs/$(RUN)/aip/policy.pt`.
-ABLATION ?=
+# axis in 0.4-1.6, into runs/$(RUN)/aip/; resumable. Score it with `make eval POLICY=runs/$(RUN)/aip/policy.pt`.
+# Table 2's ablations (train/ablation.py): ABLATION=-AIP or -Rand post-trains into runs/$(RUN)/aip-AIP/ or aip-Rand/;
+# -Syn and -Trans are their own pre-training runs (`make corpus ABLATION=-Syn`, then `make train-bc ABLATION=-Syn`:
+# runs/$(RUN)-Syn/; -Trans: runs/$(RUN)-Trans/, an MLP), post-trained by `make train-aip ABLATION=-Syn` into
+# runs/$(RUN)-Syn/aip/; -RL is runs/$(RUN)/policy.pt as it is. Every row is scored on the full corpus by `make eval`.
 AIP_ARGS ?=
 train-aip: install
 	$(CLI) train-aip --name $(CORPUS) --run runs/$(RUN) $(if $(ABLATION),--ablation=$(ABLATION)) $(AIP_ARGS)

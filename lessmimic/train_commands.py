@@ -12,12 +12,14 @@ from pipeline.errors import InputError
 def _cmd_train_bc(a: argparse.Namespace) -> int:
     import torch
 
+    from train.ablation import ablated
     from train.run import TrainConfig, train
 
     torch.set_num_threads(a.threads)
+    ab = ablated(a.name, a.run, a.ablation, "pre")
     cfg = TrainConfig(
-        name=a.name,
-        backbone=a.backbone,
+        name=ab.corpus,
+        backbone="mlp" if a.ablation == "-Trans" else a.backbone,
         vae_steps=a.vae_steps,
         bc_steps=a.bc_steps,
         dagger_iterations=a.dagger_iterations,
@@ -28,7 +30,7 @@ def _cmd_train_bc(a: argparse.Namespace) -> int:
         seed=a.seed,
         device=a.device,
     )
-    report = train(cfg, Path(a.run), overwrite=a.overwrite)
+    report = train(cfg, ab.run, overwrite=a.overwrite)
     scale, last = report["scale"], report["scale"].get("dagger_last", {})
     rmse, success = last.get("action_rmse", float("nan")), last.get("success", float("nan"))
     print(
@@ -79,22 +81,25 @@ def _cmd_eval(a: argparse.Namespace) -> int:
 def _cmd_train_aip(a: argparse.Namespace) -> int:
     import torch
 
+    from train.ablation import ablated
     from train.aip import PostTrainConfig, post_train
     from train.post_env import PostEnvConfig
 
     torch.set_num_threads(a.threads)
+    ab = ablated(a.name, a.run, a.ablation, "post")
     cfg = PostTrainConfig(
         iterations=a.iterations,
         steps_per_env=a.steps_per_env,
         env=PostEnvConfig(envs=a.envs, threads=a.env_threads),
-        ablation=a.ablation,
+        ablation=ab.post,
         seed=a.seed,
     )
-    policy = Path(a.run) / "policy.pt"
+    policy = ab.run / "policy.pt"
     if not policy.is_file():
-        raise InputError(policy, "policy.pt", "no BC + DAgger policy here: run `make train-bc` first")
-    out = Path(a.run) / f"aip{a.ablation}"
-    row = post_train(a.name, policy, out, cfg, device=a.device)
+        make = "make train-bc" + (f" ABLATION={a.ablation}" if a.ablation in ("-Syn", "-Trans") else "")
+        raise InputError(policy, "policy.pt", f"no BC + DAgger policy here: run `{make}` first")
+    out = ab.post_dir
+    row = post_train(ab.corpus, policy, out, cfg, device=a.device)
     print(
         f"post-trained {out / 'policy.pt'}: {row.get('iteration', -1) + 1} PPO iterations, {row.get('env_steps', 0)} "
         f"env steps; last task reward {row.get('task_reward', float('nan')):.3f}, AIP reward "
@@ -113,6 +118,11 @@ def add_train(sub) -> None:
     p.add_argument("--run", default="runs/bc", help="the run folder (default runs/bc); a rerun resumes")
     p.add_argument("--overwrite", action="store_true", help="start the run afresh")
     p.add_argument("--backbone", choices=("transformer", "mlp"), default="transformer", help="policy backbone")
+    p.add_argument(
+        "--ablation",
+        default="",
+        help="-Syn (on datasets/<NAME>-syn/, into <RUN>-Syn) or -Trans (MLP, into <RUN>-Trans): train.ablation",
+    )
     from train.run import TrainConfig  # the defaults: the laptop scale
 
     d = TrainConfig()
@@ -138,7 +148,12 @@ def add_train(sub) -> None:
     d = PostTrainConfig()
     p.add_argument("--name", default="corpus", help="the corpus (its valid episodes and its reference buffers)")
     p.add_argument("--run", default="runs/bc", help="the BC + DAgger run folder (its policy.pt); a rerun resumes")
-    p.add_argument("--ablation", default="", help="-AIP (no interaction prior) or -Rand (no randomisation)")
+    p.add_argument(
+        "--ablation",
+        default="",
+        help="-AIP (no interaction prior), -Rand (no randomisation), or -Syn / -Trans (post-train <RUN>-Syn / "
+        "<RUN>-Trans, -Syn on datasets/<NAME>-syn/): train.ablation",
+    )
     p.add_argument("--iterations", type=int, default=d.iterations, help="PPO iterations")
     p.add_argument("--steps-per-env", type=int, default=d.steps_per_env, help="rollout steps per env and iteration")
     p.add_argument("--envs", type=int, default=d.env.envs, help="environments stepped together")
