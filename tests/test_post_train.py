@@ -22,7 +22,7 @@ def bc_policy(bc_corpus):
     return bc_corpus[1]
 
 
-SMOKE = PostTrainConfig(iterations=1, steps_per_env=6, env=PostEnvConfig(envs=2), disc_minibatches=2)
+SMOKE = PostTrainConfig(iterations=1, steps_per_env=6, env=PostEnvConfig(envs=2), disc_minibatches=2, critic_warmup=0)
 
 
 def test_the_actor_starts_as_the_bc_policy_and_is_plugged_by_name(bc_policy):
@@ -89,6 +89,23 @@ def test_one_ppo_iteration_from_a_bc_checkpoint_trains_the_policy_and_both_prior
     assert [r["iteration"] for r in rows] == [0, 1]
 
 
+def test_the_critic_warms_up_alone_at_its_own_rate(bc_policy):
+    from train.aip import build, iteration
+
+    env, alg = build("train", bc_policy, replace(SMOKE, critic_warmup=1))
+    assert [g["lr"] for g in alg.optimizer.param_groups] == [SMOKE.ppo.learning_rate, SMOKE.critic_lr]
+    actor, critic = [p.clone() for p in alg.actor.parameters()], [p.clone() for p in alg.critic.parameters()]
+    alg.freeze_actor(True)
+    iteration(env, alg, env.get_observations(), SMOKE.steps_per_env)
+    assert all(torch.equal(a, b) for a, b in zip(actor, alg.actor.parameters()))
+    assert any(not torch.equal(a, b) for a, b in zip(critic, alg.critic.parameters()))
+    alg.freeze_actor(False)
+    assert not any(p.requires_grad for p in alg.actor.policy.vae.parameters())  # the VAE stays frozen
+    iteration(env, alg, env.get_observations(), SMOKE.steps_per_env)
+    assert any(not torch.equal(a, b) for a, b in zip(actor, alg.actor.parameters()))
+    env.close()
+
+
 def test_ablations_drop_what_they_name_and_unknown_ones_are_refused(bc_policy, tmp_path, capsys):
     from lessmimic.cli import main
     from train.evaluate import EvalConfig, scale_line, scale_note
@@ -97,8 +114,8 @@ def test_ablations_drop_what_they_name_and_unknown_ones_are_refused(bc_policy, t
     assert "aip_reward" not in row and "amp_reward" in row
     line = scale_line(scale_note("train", EvalConfig(), tmp_path / "policy.pt"))
     assert "post-trained 1 PPO iterations (12 env steps in 2 envs, ablation -AIP)" in line
-    with pytest.raises(InputError, match="ablation: unknown ablation '-Foo'; known: -AIP, -Rand"):
-        PostTrainConfig(ablation="-Foo")
+    with pytest.raises(InputError, match="ablation: not a post-training ablation: '-Syn'; known: -AIP, -Rand"):
+        PostTrainConfig(ablation="-Syn")
     capsys.readouterr()  # the progress bars so far
     assert main(["train-aip", "--name", "train", "--run", str(bc_policy.parent), "--ablation=-Foo"]) == 2
     assert main(["train-aip", "--name", "train", "--run", str(tmp_path / "none")]) == 2

@@ -16,7 +16,8 @@ priors. Read top to bottom:
    ``post_log.jsonl`` per iteration, and ``policy.pt`` (an interaction-policy checkpoint that ``lessmimic eval``
    scores like any other) after each.
 
-Ablations: ``-AIP`` drops the interaction prior, ``-Rand`` every randomisation (:mod:`train.randomize`).
+Ablations (:mod:`train.ablation`): ``-AIP`` drops the interaction prior, ``-Rand`` every randomisation
+(:mod:`train.randomize`); ``-Syn`` and ``-Trans`` post-train their own pre-training run in the same way.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from pipeline.dataset.read import episode_ranges, read_columns
 from pipeline.errors import InputError
 from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
 from pipeline.stage.paths import stage_dir
+from train.ablation import POST_TRAINING
 from train.discriminator import Discriminator, DiscriminatorConfig
 from train.episodes import load_episodes
 from train.policy import PROPRIO_COLUMN, load_policy, save_policy
@@ -46,8 +48,6 @@ from train.randomize import RandomizationConfig
 from train.rewards import RewardWeights, lsgan_reward
 from train.rl_model import InteractionActor
 from train.vae import DF_COLUMN, DFVAE
-
-ABLATIONS = ("-AIP", "-Rand")
 
 
 @dataclass(frozen=True)
@@ -75,22 +75,30 @@ class PostTrainConfig:
     """``iterations`` of ``steps_per_env`` steps in ``env.envs`` environments; ``init_std`` the actor's exploration
     noise (rad); ``disc_minibatches``: each prior makes one pass per iteration over the iteration's policy samples
     in that many minibatches, each against as many reference samples drawn at random (so its cost follows the
-    rollout's size, as PPO's own update does); ``ablation`` one of
-    :data:`ABLATIONS` or empty."""
+    rollout's size, as PPO's own update does); ``ablation`` one of :data:`train.ablation.POST_TRAINING` or empty.
 
-    iterations: int = 50
+    The critic starts from scratch and learns at its own ``critic_lr`` (rsl_rl gives actor and critic one rate: at
+    the actor's 1e-6 an Adam step moves a weight by ~1e-6, and the first laptop run's critic never fitted returns of
+    a few hundred, its value loss still ~6e3 after 600 iterations, so the advantages were the returns themselves);
+    for the first ``critic_warmup`` iterations only the critic and the priors learn, the actor stays the BC + DAgger
+    policy."""
+
+    iterations: int = 600
     steps_per_env: int = 24
     env: PostEnvConfig = field(default_factory=PostEnvConfig)
     ppo: PPOConfig = field(default_factory=PPOConfig)
     disc: DiscriminatorConfig = field(default_factory=DiscriminatorConfig)
     disc_minibatches: int = 4
     init_std: float = 0.1
+    critic_lr: float = 1e-3
+    critic_warmup: int = 50
     ablation: str = ""
     seed: int = 0
 
     def __post_init__(self):
-        if self.ablation and self.ablation not in ABLATIONS:
-            raise InputError(None, "ablation", f"unknown ablation {self.ablation!r}; known: {', '.join(ABLATIONS)}")
+        if self.ablation and self.ablation not in POST_TRAINING:
+            why = f"not a post-training ablation: {self.ablation!r}; known: {', '.join(POST_TRAINING)}"
+            raise InputError(None, "ablation", why)
 
 
 class AdversarialPPO(PPO):
@@ -99,13 +107,22 @@ class AdversarialPPO(PPO):
     ``disc_minibatches`` per prior and iteration (:class:`PostTrainConfig`)."""
 
     def __init__(self, actor, critic, storage, *, priors: dict, vae: DFVAE, weights: RewardWeights,
-                 disc_minibatches: int, **ppo) -> None:  # fmt: skip
+                 disc_minibatches: int, critic_lr: float, **ppo) -> None:  # fmt: skip
         super().__init__(actor, critic, storage, **ppo)
+        self.optimizer = torch.optim.Adam(
+            [{"params": actor.parameters(), "lr": self.learning_rate}, {"params": critic.parameters(), "lr": critic_lr}]
+        )  # the "fixed" schedule never rewrites the groups' rates
+        self.actor_trainable = [p for p in actor.parameters() if p.requires_grad]  # not the frozen VAE
         self.priors, self.vae, self.disc_minibatches = priors, vae, disc_minibatches
         self.style_weight = {"aip": weights.interaction_style, "amp": weights.motion_style}
         self.disc_optim = {k: torch.optim.Adam(d.parameters(), lr=d.config.lr) for k, (d, _) in priors.items()}
         self.samples: dict[str, list[torch.Tensor]] = {k: [] for k in priors}
         self.style_rewards: dict[str, list[float]] = {k: [] for k in priors}  # per step, for the log
+
+    def freeze_actor(self, frozen: bool) -> None:
+        """Hold the actor (its mean and its exploration noise) while the critic warms up."""
+        for p in self.actor_trainable:
+            p.requires_grad_(not frozen)
 
     def style_inputs(self, style: dict) -> dict[str, torch.Tensor]:
         """What each prior reads from the environment's ``extras["style"]``."""
@@ -189,7 +206,8 @@ def build(name: str, policy_path: str | Path, config: PostTrainConfig, device: s
     refs = reference_buffers(name, vae) if priors else {}
     discs = {k: (Discriminator(refs[k], config.disc).to(device), refs[k].to(device)) for k in priors}
     alg = AdversarialPPO(actor, critic, storage, priors=discs, vae=vae, weights=env_cfg.weights,
-                         disc_minibatches=config.disc_minibatches, device=device, **asdict(config.ppo))  # fmt: skip
+                         disc_minibatches=config.disc_minibatches, critic_lr=config.critic_lr, device=device,
+                         **asdict(config.ppo))  # fmt: skip
     return env, alg
 
 
@@ -239,6 +257,7 @@ def post_train(name: str, policy_path: str | Path, out_dir: str | Path, config: 
     obs, row = env.get_observations(), {}
     for it in tqdm(range(start, config.iterations), desc="post-train", unit="iteration"):
         t0 = time.perf_counter()
+        alg.freeze_actor(it < config.critic_warmup)
         obs, figures = iteration(env, alg, obs, config.steps_per_env)
         steps = (it + 1) * config.steps_per_env * env.num_envs
         row = {"iteration": it, "env_steps": steps, **figures, "seconds": time.perf_counter() - t0}
