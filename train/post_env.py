@@ -67,7 +67,7 @@ def task_rewards(env: InteractionEnv, actions: np.ndarray, last_actions: np.ndar
         "object_tracking": R.object_tracking(obj, obj_ref, weights.object_sigma_m),
         "action_rate": R.action_rate(actions, last_actions),
         "termination": R.termination(fell, np.zeros_like(fell)),
-        "joint_limits": R.joint_limits(q, lower, upper),
+        "joint_limits": R.joint_limits(q, lower, upper, weights.soft_limit),
     }
     return R.total(terms, weights), {k: float(np.mean(v)) for k, v in terms.items()}
 
