@@ -161,23 +161,41 @@ def _report(
     }
 
 
+KINEMATIC_NOTE = (
+    "Teacher `kinematic` (physicalize.kinematic): the data of LessMimic's 'Ours - Syn.' ablation (raw retargeted "
+    "mocap instead of physicalized data). `observation.state` is the retargeted qpos, `observation.qvel` its central "
+    "differences, `action` the next frame's joint positions, `observation.torque` zero; `valid` is True for every "
+    "clip and `physics_valid` says whether its poses pass the simulated clips' bars."
+)
+
+
 def _card(name: str, kept: list[ClipResult], src: Path, spec: TeacherSpec, teacher: str, prof, features) -> DatasetCard:
     if teacher == "kinematic":
-        return _kinematic_card(name, kept, src, prof, features)
-    teacher_note = f"Teacher: `{teacher}`" + (
-        f" (checkpoint sha256 {spec.digest}): the base QP controller's joint targets plus a learned "
-        "residual (PPO, physicalize.residual), used deterministically (mean action)."
-        if spec.digest
-        else "."
-    )
+        title = f"{name}: G1 retargeted motion in the physicalized layout (NOT simulated: the -Syn ablation)"
+        what = (
+            "retargeted G1 motion as it is, with finite-difference velocities and the next frame's joints as the "
+            "action (teacher `kinematic`); nothing is simulated. Every episode carries the physics figures measured "
+            "on its poses (`physics_valid`, `physics_reason`)."
+        )
+        notes = [KINEMATIC_NOTE]
+    else:
+        title = f"{name}: G1 physicalized state-action data"
+        what = (
+            f"retargeted G1 motion made physically valid by closed-loop tracking in MuJoCo (teacher `{teacher}`: "
+            "whole-body QP" + (" + learned residual" if spec.digest else "") + "); every episode carries its "
+            "validation figures."
+        )
+        teacher_note = f"Teacher: `{teacher}`" + (
+            f" (checkpoint sha256 {spec.digest}): the base QP controller's joint targets plus a learned "
+            "residual (PPO, physicalize.residual), used deterministically (mean action)."
+            if spec.digest
+            else "."
+        )
+        notes = CARD_NOTES + [teacher_note]
     synthetic = any(r.robot.provenance.get("synthetic") for r in kept)
     return DatasetCard(
-        title=f"{name}: G1 physicalized state-action data",
-        description=("SYNTHETIC demonstrations: " if synthetic else "")
-        + "retargeted G1 motion made physically valid by "
-        f"closed-loop tracking in MuJoCo (teacher `{teacher}`: whole-body QP"
-        + (" + learned residual" if spec.digest else "")
-        + "); every episode carries its validation figures.",
+        title=title,
+        description=("SYNTHETIC demonstrations: " if synthetic else "") + what,
         provenance=[r.source for r in kept] + [str(src)],
         fps=int(round(kept[0].robot.fps)),
         synthetic=synthetic,
@@ -185,33 +203,7 @@ def _card(name: str, kept: list[ClipResult], src: Path, spec: TeacherSpec, teach
         actuator_profile=f"{prof.name}: {prof.description}",
         license="apache-2.0" if synthetic else "other",
         feature_frames={f.name: "world, z-up" if f.name.startswith("object") else "" for f in features},
-        notes=CARD_NOTES + [teacher_note, objects_note([r.robot for r in kept])],
-    )
-
-
-def _kinematic_card(name: str, kept: list[ClipResult], src: Path, prof, features) -> DatasetCard:
-    synthetic = any(r.robot.provenance.get("synthetic") for r in kept)
-    return DatasetCard(
-        title=f"{name}: G1 retargeted motion in the physicalized layout (NOT simulated: the -Syn ablation)",
-        description=("SYNTHETIC demonstrations: " if synthetic else "")
-        + "retargeted G1 motion as it is, with finite-difference velocities and the next frame's joints as the "
-        "action (teacher `kinematic`); nothing is simulated. Every episode carries the physics figures measured on "
-        "its poses (`physics_valid`, `physics_reason`).",
-        provenance=[r.source for r in kept] + [str(src)],
-        fps=int(round(kept[0].robot.fps)),
-        synthetic=synthetic,
-        stage="physicalized",
-        actuator_profile=f"{prof.name}: {prof.description}",
-        license="apache-2.0" if synthetic else "other",
-        feature_frames={f.name: "world, z-up" if f.name.startswith("object") else "" for f in features},
-        notes=[
-            "Teacher `kinematic` (physicalize.kinematic): the data of LessMimic's 'Ours - Syn.' ablation (raw "
-            "retargeted mocap instead of physicalized data). `observation.state` is the retargeted qpos, "
-            "`observation.qvel` its central differences, `action` the next frame's joint positions, "
-            "`observation.torque` zero; `valid` is True for every clip and `physics_valid` says whether its poses "
-            "pass the simulated clips' bars.",
-            objects_note([r.robot for r in kept]),
-        ],
+        notes=notes + [objects_note([r.robot for r in kept])],
     )
 
 
