@@ -12,14 +12,14 @@ from pipeline.errors import InputError
 def _cmd_train_bc(a: argparse.Namespace) -> int:
     import torch
 
-    from train.ablation import ablated
+    from train.ablation import PRE_TRAINING, ablated
     from train.run import TrainConfig, train
 
     torch.set_num_threads(a.threads)
     ab = ablated(a.name, a.run, a.ablation, "pre")
     cfg = TrainConfig(
         name=ab.corpus,
-        backbone="mlp" if a.ablation == "-Trans" else a.backbone,
+        backbone=ab.backbone if a.ablation in PRE_TRAINING else a.backbone,
         vae_steps=a.vae_steps,
         bc_steps=a.bc_steps,
         dagger_iterations=a.dagger_iterations,
@@ -81,7 +81,7 @@ def _cmd_eval(a: argparse.Namespace) -> int:
 def _cmd_train_aip(a: argparse.Namespace) -> int:
     import torch
 
-    from train.ablation import ablated
+    from train.ablation import PRE_TRAINING, ablated
     from train.aip import PostTrainConfig, post_train
     from train.post_env import PostEnvConfig
 
@@ -96,7 +96,7 @@ def _cmd_train_aip(a: argparse.Namespace) -> int:
     )
     policy = ab.run / "policy.pt"
     if not policy.is_file():
-        make = "make train-bc" + (f" ABLATION={a.ablation}" if a.ablation in ("-Syn", "-Trans") else "")
+        make = "make train-bc" + (f" ABLATION={a.ablation}" if a.ablation in PRE_TRAINING else "")
         raise InputError(policy, "policy.pt", f"no BC + DAgger policy here: run `{make}` first")
     out = ab.post_dir
     row = post_train(ab.corpus, policy, out, cfg, device=a.device)

@@ -24,6 +24,7 @@ from pipeline.errors import InputError
 
 ABLATIONS = ("-AIP", "-Syn", "-Rand", "-RL", "-Trans")
 POST_TRAINING = ("-AIP", "-Rand")
+PRE_TRAINING = ("-Syn", "-Trans")
 
 
 @dataclass(frozen=True)
