@@ -87,7 +87,9 @@ train-bc: install
 	$(CLI) train-bc --name $(CORPUS) --run runs/$(RUN) $(if $(ABLATION),--ablation=$(ABLATION)) $(if $(OVERWRITE),--overwrite) $(TRAIN_ARGS)
 
 # Train II (paper Sec. III-C): PPO from runs/$(RUN)/policy.pt with the AIP and AMP style priors, objects scaled per
-# axis in 0.4-1.6, into runs/$(RUN)/aip/; resumable. Score it with `make eval POLICY=runs/$(RUN)/aip/policy.pt`.
+# axis in 0.4-1.6, into runs/$(RUN)/aip/: 600 iterations x 8 envs x 24 steps = 115k env steps, ~10 min on one core, a
+# smoke scale for RL; resumable, and AIP_ARGS="--iterations 1200" continues a finished run. Score it with
+# `make eval POLICY=runs/$(RUN)/aip/policy.pt`.
 # Table 2's ablations (train/ablation.py): ABLATION=-AIP or -Rand post-trains into runs/$(RUN)/aip-AIP/ or aip-Rand/;
 # -Syn and -Trans are their own pre-training runs (`make corpus ABLATION=-Syn`, then `make train-bc ABLATION=-Syn`:
 # runs/$(RUN)-Syn/; -Trans: runs/$(RUN)-Trans/, an MLP), post-trained by `make train-aip ABLATION=-Syn` into

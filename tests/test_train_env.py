@@ -1,6 +1,8 @@
 """The interaction environment, the teacher service and the evaluation harness on the default corpus (real
 retarget -> physicalize -> features datasets, real MuJoCo)."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -140,6 +142,12 @@ def test_the_evaluation_harness_scores_the_teacher(corpus, tmp_path):
     assert "1 episodes per cell and seed" in scale_line(note) and "trained on unknown" in scale_line(note)
     (tmp_path / "report.json").write_text('{"scale": {"bc_steps": 7, "dagger_iterations": 3}}')
     assert scale_note("train", EvalConfig(), tmp_path / "p.pt")["policy"]["training_scale"]["dagger_iterations"] == 3
+    scale = dict(corpus="train-syn", corpus_episodes=4, corpus_frames=9, bc_steps=7, bc_samples=70, dagger_iterations=3)
+    scale |= dict(dagger_episodes_per_iteration=2, dagger_windows=5, device="cpu")
+    (tmp_path / "q").mkdir()
+    (tmp_path / "q" / "report.json").write_text(json.dumps({"scale": scale}))
+    line = scale_line(scale_note("train", EvalConfig(), tmp_path / "q" / "policy.pt"))
+    assert "trained on 4 corpus episodes of `train-syn` (9 frames)" in line  # the training corpus, e.g. -Syn's
     (tmp_path / "dagger_log.jsonl").write_text('{"iteration": 0, "aggregated_windows": 11}\n' * 3)
     early = scale_note("train", EvalConfig(), tmp_path / "policy_dagger0.pt")["policy"]["training_scale"]
     assert early["dagger_iterations"] == 1 and early["dagger_windows"] == 11 and early["bc_steps"] == 7

@@ -155,8 +155,9 @@ def scale_line(note: dict) -> str:
     if policy:
         s = policy.get("training_scale")
         s = s if isinstance(s, dict) else {}
+        of = f" of `{s['corpus']}`" if "corpus" in s else ""  # the training corpus (-Syn: another one)
         trained = (
-            f"{s['corpus_episodes']} corpus episodes ({s['corpus_frames']} frames), BC {s['bc_steps']} steps "
+            f"{s['corpus_episodes']} corpus episodes{of} ({s['corpus_frames']} frames), BC {s['bc_steps']} steps "
             f"({s['bc_samples']} samples), DAgger {s['dagger_iterations']} iterations x "
             f"{s['dagger_episodes_per_iteration']} episodes ({s['dagger_windows']} windows), on {s['device']}"
             if "corpus_episodes" in s

@@ -104,6 +104,7 @@ def train(config: TrainConfig, run_dir: str | Path, *, overwrite: bool = False) 
     report = {
         "config": asdict(config),
         "scale": {
+            "corpus": config.name,
             "corpus_episodes": len(episodes),
             "corpus_frames": sum(e.frames for e in episodes),
             "bc_steps": config.bc_steps,
