@@ -107,7 +107,7 @@ def bc_table(name: str) -> None:
         print(f"BC {backbone}: {bc_speed(stage_dir(name, 'features'), backbone):.0f} samples/s (1 thread)")
 
 
-def post_training_table(name: str, envs: int, iterations: int = 4, repeats: int = 5) -> None:
+def post_training_table(name: str, envs: int, iterations: int = 4, repeats: int = 9) -> None:
     """PPO env steps per CPU-second of the three cases, ``repeats`` rounds of ``iterations`` iterations each, the
     cases interleaved round by round (a load that comes and goes hits all three alike); the median round per case.
     One round of 4 iterations per case gave overheads from -12% to +48% on the same code on a loaded laptop: the
