@@ -12,14 +12,14 @@ from pipeline.errors import InputError
 def _cmd_train_bc(a: argparse.Namespace) -> int:
     import torch
 
-    from train.ablation import PRE_TRAINING, ablated
+    from train.ablation import ablated
     from train.run import TrainConfig, train
 
     torch.set_num_threads(a.threads)
-    ab = ablated(a.name, a.run, a.ablation, "pre")
+    ab = ablated(a.name, a.run, a.ablation, "pre", a.backbone)
     cfg = TrainConfig(
         name=ab.corpus,
-        backbone=ab.backbone if a.ablation in PRE_TRAINING else a.backbone,
+        backbone=ab.backbone,
         vae_steps=a.vae_steps,
         bc_steps=a.bc_steps,
         dagger_iterations=a.dagger_iterations,

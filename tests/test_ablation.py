@@ -24,6 +24,8 @@ def test_each_ablation_trains_where_it_says():
     assert (syn.corpus, syn.run, syn.post_dir) == ("corpus-syn", Path("runs/bc-Syn"), Path("runs/bc-Syn/aip"))
     trans = ablated("corpus", "runs/bc", "-Trans", "post")
     assert (trans.corpus, trans.run, trans.backbone) == ("corpus", Path("runs/bc-Trans"), "mlp")
+    assert ablated("corpus", "runs/bc", "-Syn", "pre", "mlp").backbone == "mlp"  # -Syn keeps the backbone asked for
+    assert ablated("corpus", "runs/bc", "-Trans", "pre", "transformer").backbone == "mlp"
 
 
 @pytest.mark.parametrize(

@@ -43,10 +43,11 @@ class Ablated:
         return self.run / f"aip{self.post}"
 
 
-def ablated(corpus: str, run: str | Path, ablation: str, stage: str) -> Ablated:
-    """The corpus and folders of ``ablation`` (``""``: the full system) for a run named ``run`` on ``corpus``, as
-    the training ``stage`` (``pre`` or ``post``) sees them; an unknown ablation, or one the stage has nothing to do
-    for, is a one-line :class:`InputError`."""
+def ablated(corpus: str, run: str | Path, ablation: str, stage: str, backbone: str = "transformer") -> Ablated:
+    """The corpus and folders of ``ablation`` (``""``: the full system) for a run named ``run`` on ``corpus`` with
+    the ``backbone`` asked for (``-Trans``: the MLP, whatever was asked), as the training ``stage`` (``pre`` or
+    ``post``) sees them; an unknown ablation, or one the stage has nothing to do for, is a one-line
+    :class:`InputError`."""
     run = Path(run)
     if ablation and ablation not in ABLATIONS:
         raise InputError(None, "ablation", f"unknown ablation {ablation!r}; known: {', '.join(ABLATIONS)}")
@@ -59,7 +60,7 @@ def ablated(corpus: str, run: str | Path, ablation: str, stage: str) -> Ablated:
             raise InputError(None, "ablation", why + f"`make train-aip ABLATION={ablation}`")
         return Ablated(corpus, run, post=ablation)
     if ablation == "-Syn":
-        return Ablated(f"{corpus}-syn", run.with_name(run.name + "-Syn"))
+        return Ablated(f"{corpus}-syn", run.with_name(run.name + "-Syn"), backbone)
     if ablation == "-Trans":
         return Ablated(corpus, run.with_name(run.name + "-Trans"), backbone="mlp")
-    return Ablated(corpus, run)
+    return Ablated(corpus, run, backbone)
