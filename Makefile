@@ -94,9 +94,12 @@ train-bc: install
 # -Syn and -Trans are their own pre-training runs (`make corpus ABLATION=-Syn`, then `make train-bc ABLATION=-Syn`:
 # runs/$(RUN)-Syn/; -Trans: runs/$(RUN)-Trans/, an MLP), post-trained by `make train-aip ABLATION=-Syn` into
 # runs/$(RUN)-Syn/aip/; -RL is runs/$(RUN)/policy.pt as it is. Every row is scored on the full corpus by `make eval`.
+# BACKEND=mjlab steps the environments on a GPU through mjlab (MuJoCo Warp), 4096 by default (train/mjlab_env.py;
+# the box tasks: PickUp, Push, Carry); the default, cpu, is native MuJoCo.
 AIP_ARGS ?=
+BACKEND ?= cpu
 train-aip: install
-	$(CLI) train-aip --name $(CORPUS) --run runs/$(RUN) $(if $(ABLATION),--ablation=$(ABLATION)) $(AIP_ARGS)
+	$(CLI) train-aip --name $(CORPUS) --run runs/$(RUN) --backend $(BACKEND) $(if $(ABLATION),--ablation=$(ABLATION)) $(AIP_ARGS)
 
 # EVAL_ARGS="--chains 5,10" adds the long-horizon chains (Table 3) of the policy; "--episodes 8" more per cell.
 POLICY ?= runs/$(RUN)/policy.pt

@@ -87,19 +87,26 @@ def _cmd_train_aip(a: argparse.Namespace) -> int:
 
     torch.set_num_threads(a.threads)
     ab = ablated(a.name, a.run, a.ablation, "post")
+    mjlab = a.backend == "mjlab"
     cfg = PostTrainConfig(
         iterations=a.iterations,
         steps_per_env=a.steps_per_env,
-        env=PostEnvConfig(envs=a.envs, threads=a.env_threads),
+        env=PostEnvConfig(envs=a.envs or (4096 if mjlab else PostEnvConfig().envs), threads=a.env_threads),
         ablation=ab.post,
         seed=a.seed,
+        backend=a.backend,
     )
     policy = ab.run / "policy.pt"
     if not policy.is_file():
         make = "make train-bc" + (f" ABLATION={a.ablation}" if a.ablation in PRE_TRAINING else "")
         raise InputError(policy, "policy.pt", f"no BC + DAgger policy here: run `{make}` first")
     out = ab.post_dir
-    row = post_train(ab.corpus, policy, out, cfg, device=a.device)
+    device = a.device or ("cuda" if mjlab else "cpu")
+    if mjlab:
+        from train.mjlab_env import check_device
+
+        check_device(device)
+    row = post_train(ab.corpus, policy, out, cfg, device=device)
     print(
         f"post-trained {out / 'policy.pt'}: {row.get('iteration', -1) + 1} PPO iterations, {row.get('env_steps', 0)} "
         f"env steps; last task reward {row.get('task_reward', float('nan')):.3f}, AIP reward "
@@ -156,10 +163,11 @@ def add_train(sub) -> None:
     )
     p.add_argument("--iterations", type=int, default=d.iterations, help="PPO iterations")
     p.add_argument("--steps-per-env", type=int, default=d.steps_per_env, help="rollout steps per env and iteration")
-    p.add_argument("--envs", type=int, default=d.env.envs, help="environments stepped together")
+    p.add_argument("--envs", type=int, default=None, help=f"environments stepped together ({d.env.envs}; mjlab 4096)")
     p.add_argument("--env-threads", type=int, default=1, help="threads stepping the environments")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
+    p.add_argument("--backend", default="cpu", help="cpu (native MuJoCo) or mjlab (MuJoCo Warp on a GPU)")
+    p.add_argument("--device", default=None, help="torch device (cpu; cuda for --backend mjlab)")
     p.add_argument("--threads", type=int, default=1, help="torch threads")
     p.set_defaults(func=_cmd_train_aip)
     p = sub.add_parser("eval", help="the paper's Table 2 evaluation of a policy and/or the QP teacher baseline")

@@ -185,6 +185,14 @@ def _add_object(spec: mujoco.MjSpec, obj: SceneObject) -> None:
         g.rgba = [0.8, 0.5, 0.2, 1.0]
 
 
+def object_spec(obj: SceneObject) -> mujoco.MjSpec:
+    """One object alone as an ``MjSpec`` (its body, free joint and collision geoms as :func:`build_spec` adds
+    them): an mjlab entity of :mod:`train.mjlab_env`."""
+    spec = mujoco.MjSpec()
+    _add_object(spec, obj)
+    return spec
+
+
 def _volume(kind: str, size) -> float:
     if kind == "box":
         return 8.0 * float(np.prod(size))

@@ -12,6 +12,7 @@ from pipeline.terms.observations import (
     projected_gravity,
     proprioception,
     root_command,
+    root_command_to,
 )
 
 
@@ -63,3 +64,37 @@ def test_root_command_is_in_the_heading_frame(yaw_deg):
     np.testing.assert_allclose(c[:, 9:], np.tile([1.0, 0, 0], (150, 1)), atol=1e-9)
     np.testing.assert_allclose(c[-1, :3], 0, atol=1e-12)
     np.testing.assert_allclose(c[125, :3], [0.48, 0, 0], atol=1e-9)  # 24 frames to the end
+
+
+def test_numpy_and_torch_give_the_same_terms():
+    """The CPU environment (numpy) and the GPU backend (torch) share these functions: same rows, to float64 rounding."""
+    import torch
+
+    rng = np.random.default_rng(3)
+    q, v, _ = _walk(6, yaw_deg=-120.0)
+    q[:, 7:], v[:, 6:], v[:, 3:6] = rng.normal(size=(6, 29)), rng.normal(size=(6, 29)), rng.normal(size=(6, 3))
+    target = np.roll(q, 2, axis=0)
+    target[:, 3:7] = Rotation.random(6, random_state=1).as_quat()[:, [3, 0, 1, 2]]
+    a = rng.normal(size=(6, 29))
+    t = [torch.as_tensor(x) for x in (q, v, target, a)]
+    np.testing.assert_allclose(proprioception(*t[:2], t[3]).numpy(), proprioception(q, v, a), atol=1e-12)
+    np.testing.assert_allclose(
+        root_command_to(t[0], t[2], t[1][:, :3]).numpy(), root_command_to(q, target, v[:, :3]), atol=1e-12
+    )
+
+
+def test_root_command_matches_scipy_rotations():
+    """The heading-frame rotation written over arrays equals scipy's composition of rotations."""
+    rng = np.random.default_rng(4)
+    q = np.zeros((5, 36))
+    q[:, :3] = rng.normal(size=(5, 3))
+    q[:, 3:7] = Rotation.random(5, random_state=2).as_quat()[:, [3, 0, 1, 2]]
+    target = q.copy()
+    target[:, :3] += rng.normal(size=(5, 3))
+    target[:, 3:7] = Rotation.random(5, random_state=3).as_quat()[:, [3, 0, 1, 2]]
+    vel = rng.normal(size=(5, 3))
+    x = Rotation.from_quat(q[:, [4, 5, 6, 3]]).apply([1.0, 0, 0])
+    h_inv = Rotation.from_euler("z", np.arctan2(x[:, 1], x[:, 0])[:, None]).inv()
+    R = (h_inv * Rotation.from_quat(target[:, [4, 5, 6, 3]])).as_matrix()
+    want = np.concatenate([h_inv.apply(target[:, :3] - q[:, :3]), R[:, :, 0], R[:, :, 1], h_inv.apply(vel)], axis=1)
+    np.testing.assert_allclose(root_command_to(q, target, vel), want, atol=1e-12)

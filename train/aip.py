@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from rsl_rl.algorithms import PPO
+from rsl_rl.env import VecEnv
 from rsl_rl.models import MLPModel
 from rsl_rl.storage import RolloutStorage
 from tqdm import tqdm
@@ -48,6 +49,10 @@ from train.randomize import RandomizationConfig
 from train.rewards import RewardWeights, lsgan_reward
 from train.rl_model import InteractionActor
 from train.vae import DF_COLUMN, DFVAE
+
+BACKENDS = ("cpu", "mjlab")
+"""Where the environments step: native MuJoCo on the CPU (:mod:`train.post_env`) or mjlab's MuJoCo Warp on a GPU
+(:mod:`train.mjlab_env`, the paper's scale)."""
 
 
 @dataclass(frozen=True)
@@ -99,8 +104,11 @@ class PostTrainConfig:
     critic_warmup: int = 50
     ablation: str = ""
     seed: int = 0
+    backend: str = "cpu"
 
     def __post_init__(self):
+        if self.backend not in BACKENDS:
+            raise InputError(None, "backend", f"unknown backend {self.backend!r}; known: {', '.join(BACKENDS)}")
         if self.ablation and self.ablation not in POST_TRAINING:
             why = f"not a post-training ablation: {self.ablation!r}; known: {', '.join(POST_TRAINING)}"
             raise InputError(None, "ablation", why)
@@ -194,14 +202,20 @@ def _save_state(alg: AdversarialPPO, iteration: int, path: Path) -> None:
 
 
 def build(name: str, policy_path: str | Path, config: PostTrainConfig, device: str = "cpu",
-          priors: tuple[str, ...] = ("aip", "amp")) -> tuple[PostTrainEnv, AdversarialPPO]:  # fmt: skip
+          priors: tuple[str, ...] = ("aip", "amp")) -> tuple[VecEnv, AdversarialPPO]:  # fmt: skip
     """The environment and the algorithm of :func:`post_train` (module docstring, step 3) with the style ``priors``
     named (none: plain PPO); ``config.ablation`` "-Rand" switches the randomisations off."""
     torch.manual_seed(config.seed)
     env_cfg = replace(config.env, seed=config.seed)
     if config.ablation == "-Rand":
         env_cfg = replace(env_cfg, randomization=RandomizationConfig.off())
-    env = PostTrainEnv(load_episodes(name), load_policy(policy_path).layout.history, env_cfg, device)
+    history = load_policy(policy_path).layout.history
+    if config.backend == "mjlab":
+        from train.mjlab_env import MjlabPostTrainEnv, runnable_episodes
+
+        env = MjlabPostTrainEnv(runnable_episodes(load_episodes(name)), history, env_cfg, device)
+    else:
+        env = PostTrainEnv(load_episodes(name), history, env_cfg, device)
     obs = env.get_observations()
     groups = {"actor": ["policy"], "critic": ["critic"]}
     actor = InteractionActor(obs, groups, "actor", env.num_actions, str(policy_path), init_std=config.init_std)
@@ -216,7 +230,7 @@ def build(name: str, policy_path: str | Path, config: PostTrainConfig, device: s
     return env, alg
 
 
-def iteration(env: PostTrainEnv, alg: AdversarialPPO, obs, steps: int) -> tuple[object, dict]:
+def iteration(env: VecEnv, alg: AdversarialPPO, obs, steps: int) -> tuple[object, dict]:
     """One PPO iteration: ``steps`` rollout steps in every environment, the returns, the update. The next
     observation and the iteration's figures (task reward, falls, the reward terms' means, the losses)."""
     alg.train_mode()
@@ -286,6 +300,7 @@ def _report(policy_path: str | Path, out_dir: Path, config: PostTrainConfig, row
         "envs": config.env.envs,
         "steps_per_env": config.steps_per_env,
         "ablation": config.ablation or "none",
+        "backend": config.backend,
         "from": str(policy_path),
     }
     write_json_atomic(out_dir / "report.json", {"scale": {**scale, "post_training": post}})

@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 from pipeline.rotations import rotation_from_wxyz, xyzw_to_wxyz
 from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
-from pipeline.terms.observations import heading
+from pipeline.terms.observations import heading_yaw
 from train.env import InteractionEnv
 from train.episodes import Episode
 
@@ -40,7 +40,7 @@ class ChainConfig:
 
 
 def _yaw(qpos: np.ndarray) -> float:
-    return float(heading(np.asarray(qpos, dtype=float)[None, :7]).as_euler("zyx")[0, 0])
+    return float(heading_yaw(np.asarray(qpos, dtype=float)[None, :7])[0])
 
 
 def _moved(pose: np.ndarray, turn: Rotation, shift: np.ndarray) -> np.ndarray:

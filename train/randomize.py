@@ -25,12 +25,11 @@ from __future__ import annotations
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from pipeline.clip import ObjectTrack
+from pipeline.distance.array_ns import as_float, concat, namespace
 from pipeline.geometry import ObjectPhysics, Primitive
 from pipeline.robot import NQ_ROBOT, NUM_JOINTS
-from pipeline.rotations import rotation_from_wxyz, xyzw_to_wxyz
 
 
 @dataclass(frozen=True)
@@ -118,13 +117,20 @@ def placed(o: ObjectTrack, v: Variation) -> tuple[float, ...]:
     return tuple(pose)
 
 
+def turn(pose, offset):
+    """(N, 7) free-body poses ``(x y z qw qx qy qz)`` (N, 7) shifted by ``(dx, dy)`` and turned by ``dyaw`` about z,
+    ``offset`` (N, 3): ``q' = (cos dyaw/2, 0, 0, sin dyaw/2) q``; numpy or torch alike (the CPU environment turns one
+    pose at a time, :mod:`train.mjlab_env` a batch)."""
+    xp = namespace(pose)
+    c, s = xp.cos(offset[:, 2] / 2), xp.sin(offset[:, 2] / 2)
+    w, x, y, z = pose[:, 3], pose[:, 4], pose[:, 5], pose[:, 6]
+    quat = [c * w - s * z, c * x - s * y, c * y + s * x, c * z + s * w]
+    return xp.stack([pose[:, 0] + offset[:, 0], pose[:, 1] + offset[:, 1], pose[:, 2], *quat], 1)
+
+
 def _turn(qpos7: np.ndarray, offset: tuple[float, float, float]) -> None:
-    """Shift a free body's ``(x y z qw qx qy qz)`` in place by ``(dx, dy)`` and turn it by ``dyaw`` about z."""
-    dx, dy, dyaw = offset
-    qpos7[0] += dx
-    qpos7[1] += dy
-    if dyaw:
-        qpos7[3:7] = xyzw_to_wxyz((Rotation.from_euler("z", dyaw) * rotation_from_wxyz(qpos7[3:7])).as_quat())[0]
+    """:func:`turn` in place on one pose."""
+    qpos7[:] = turn(qpos7[None, :7], np.asarray(offset, dtype=float)[None])[0]
 
 
 def perturb_initial_state(qpos: np.ndarray, joint_range: np.ndarray, object_adr: list[int], v: Variation) -> None:
@@ -144,15 +150,26 @@ def perturb_command(target_qpos: np.ndarray, v: Variation) -> np.ndarray:
     return out
 
 
-def actuation_noise(actions: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
-    """``a + N(0, sigma^2)`` per joint target."""
-    return actions + rng.normal(0.0, sigma, actions.shape) if sigma > 0 else actions
+def actuation_noise(actions, sigma: float, rng):
+    """``a + N(0, sigma^2)`` per joint target; numpy with a numpy ``rng``, torch with a ``torch.Generator``."""
+    return actions + sigma * _standard_normal(actions, rng) if sigma > 0 else actions
 
 
-def perception_noise(df: np.ndarray, sigma: tuple[float, float, float], rng: np.random.Generator) -> np.ndarray:
+def perception_noise(df, sigma: tuple[float, float, float], rng):
     """``u + N(0, s^2)`` on the DF features ``(N, K x 10)``, ``s`` per part of ``u = [phi, grad, v_norm, v_tan]``:
-    ``sigma[0]`` on phi, ``sigma[1]`` on the gradient, ``sigma[2]`` on both velocities."""
+    ``sigma[0]`` on phi, ``sigma[1]`` on the gradient, ``sigma[2]`` on both velocities (numpy or torch, as
+    :func:`actuation_noise`)."""
     if not any(sigma):
         return df
-    s = np.array([sigma[0]] + [sigma[1]] * 3 + [sigma[2]] * 6)
-    return df + rng.normal(0.0, 1.0, df.shape) * np.tile(s, df.shape[-1] // 10)
+    xp = namespace(df)
+    s = as_float([sigma[0]] + [sigma[1]] * 3 + [sigma[2]] * 6, xp, like=df)
+    return df + _standard_normal(df, rng) * concat([s] * (df.shape[-1] // 10), xp)
+
+
+def _standard_normal(like, rng):
+    """Standard normal samples shaped as ``like``, from ``rng`` (numpy ``Generator`` or ``torch.Generator``)."""
+    if isinstance(rng, np.random.Generator):
+        return rng.standard_normal(like.shape)
+    import torch
+
+    return torch.randn(like.shape, generator=rng, dtype=like.dtype, device=like.device)

@@ -75,7 +75,7 @@ class _Section:
         return qx, qy, nx, ny, e.inside([x, y])
 
 
-def _box(x, y, z, hx, hy, hz, xp):
+def box_local(x, y, z, hx, hy, hz, xp):
     """Box field; half-extents are floats or per-point arrays."""
     cx, cy, cz = xp.clip(x, -hx, hx), xp.clip(y, -hy, hy), xp.clip(z, -hz, hz)
     dx, dy, dz = x - cx, y - cy, z - cz
@@ -112,7 +112,7 @@ class BoxShape:
     half: tuple[float, float, float]
 
     def local(self, x, y, z, xp):
-        return _box(x, y, z, *self.half, xp)
+        return box_local(x, y, z, *self.half, xp)
 
     def world(self, points, R, t):
         """As :meth:`SphereShape.world`: the fused kernel of :mod:`pipeline.distance.box_warp`."""
@@ -312,7 +312,7 @@ class ChairShape:
         if not isinstance(x, np.ndarray):
             table = xp.as_tensor(table, dtype=x.dtype, device=x.device)
         hx, hy, hz, ox, oy, oz = (table[part, i] for i in range(6))
-        phi, g, c = _box(x - ox, y - oy, z - oz, hx, hy, hz, xp)
+        phi, g, c = box_local(x - ox, y - oy, z - oz, hx, hy, hz, xp)
         return phi, g, (c[0] + ox, c[1] + oy, c[2] + oz)
 
     def world(self, points, R, t):

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from pipeline.distance.array_ns import namespace
 from pipeline.errors import InputError
 from pipeline.robot import g1_model
 
@@ -70,6 +71,15 @@ def link_state(m: mujoco.MjModel, d: mujoco.MjData, ids: list[int]) -> tuple[np.
     """``(pos (K, 3), rot (K, 3, 3), vel (K, 3))`` of the bodies ``ids`` in ``d`` after ``mj_kinematics``,
     ``mj_comPos`` and ``mj_comVel`` (any model whose robot is one kinematic tree: a scene with objects too).
     ``vel`` is the body origin's linear velocity, ``v_c + w x (x - c)`` (the module docstring)."""
-    cvel = d.cvel[ids]
-    offset = d.xpos[ids] - d.subtree_com[m.body_rootid[ids]]
-    return d.xpos[ids].copy(), d.xmat[ids].reshape(len(ids), 3, 3).copy(), cvel[:, 3:] + np.cross(cvel[:, :3], offset)
+    vel = link_velocity(d.xpos[ids], d.cvel[ids], d.subtree_com[m.body_rootid[ids]])
+    return d.xpos[ids].copy(), d.xmat[ids].reshape(len(ids), 3, 3).copy(), vel
+
+
+def link_velocity(xpos, cvel, root_com):
+    """(..., 3) a body origin's linear velocity ``v_c + w x (x - c)`` from MuJoCo's ``cvel`` (..., 6: angular, then
+    linear, about the tree's centre of mass ``root_com`` (..., 3)) and the body position ``xpos`` (..., 3); numpy
+    or torch alike (native MuJoCo and MuJoCo Warp store the same fields)."""
+    w, r = cvel[..., :3], xpos - root_com
+    cross = [w[..., 1] * r[..., 2] - w[..., 2] * r[..., 1], w[..., 2] * r[..., 0] - w[..., 0] * r[..., 2],
+             w[..., 0] * r[..., 1] - w[..., 1] * r[..., 0]]  # fmt: skip
+    return cvel[..., 3:] + namespace(xpos).stack(cross, -1)

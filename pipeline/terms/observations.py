@@ -13,10 +13,10 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from pipeline.distance.array_ns import concat, namespace
+from pipeline.distance.field import rotation_rows
 from pipeline.robot import G1_JOINT_NAMES, JOINTS_QPOS, JOINTS_QVEL, ROOT_ANG_VEL
-from pipeline.rotations import rotation_from_wxyz
 
 PROPRIO_NAMES: tuple[str, ...] = (
     tuple(f"q.{j}" for j in G1_JOINT_NAMES)
@@ -41,44 +41,57 @@ ROOT_COMMAND_NAMES: tuple[str, ...] = (
 )
 
 
-def rot6(R: np.ndarray) -> np.ndarray:
+def rot6(R):
     """(..., 6) the 6-D rotation of rotation matrices ``R`` (..., 3, 3): their first two columns, column-major."""
-    return np.swapaxes(R[..., :, :2], -1, -2).reshape(*R.shape[:-2], 6)
+    return concat([R[..., :, 0], R[..., :, 1]], namespace(R), axis=-1)
 
 
-def projected_gravity(qpos: np.ndarray) -> np.ndarray:
-    """(T, 3) unit gravity direction in the root frame, ``R_root^T (0, 0, -1)``."""
-    return rotation_from_wxyz(qpos[:, 3:7]).inv().apply([0.0, 0.0, -1.0])
+def rotation_matrix(quat):
+    """(N, 3, 3) rotation matrices of wxyz quaternions ``quat`` (N, 4) (normalised first)."""
+    xp = namespace(quat)
+    return xp.stack([xp.stack(row, -1) for row in rotation_rows(quat, xp)], -2)
 
 
-def previous_actions(action: np.ndarray) -> np.ndarray:
+def projected_gravity(qpos):
+    """(N, 3) unit gravity direction in the root frame, ``R_root^T (0, 0, -1)``: minus R's last row."""
+    return -rotation_matrix(qpos[:, 3:7])[:, 2, :]
+
+
+def previous_actions(action):
     """(T, 29) the action of the frame before each frame of a clip (zeros before the first)."""
-    return np.concatenate([np.zeros((1, action.shape[1])), action[:-1]])
+    return concat([action[:1] * 0, action[:-1]], namespace(action))
 
 
-def proprioception(qpos: np.ndarray, qvel: np.ndarray, last_action: np.ndarray) -> np.ndarray:
+def proprioception(qpos, qvel, last_action):
     """(N, 93) ``[q, dq, gravity_root, omega_root, a_(t-1)]`` from ``qpos (N, 36)``, MuJoCo ``qvel (N, 35)``
     (its root angular velocity is already in the root frame) and the previous actions ``last_action (N, 29)``
-    (the rows are a clip's frames, with :func:`previous_actions`, or an environment batch)."""
-    return np.concatenate(
-        [qpos[:, JOINTS_QPOS], qvel[:, JOINTS_QVEL], projected_gravity(qpos), qvel[:, ROOT_ANG_VEL], last_action],
-        axis=1,
-    )
+    (the rows are a clip's frames, with :func:`previous_actions`, or an environment batch); numpy or torch alike
+    (:mod:`pipeline.distance.array_ns`), so the CPU and GPU environments share it."""
+    parts = [qpos[:, JOINTS_QPOS], qvel[:, JOINTS_QVEL], projected_gravity(qpos), qvel[:, ROOT_ANG_VEL], last_action]
+    return concat(parts, namespace(qpos), axis=1)
 
 
-def heading(qpos: np.ndarray) -> Rotation:
-    """The root's heading frame per frame: the rotation about z by the yaw of the root's x-axis."""
-    x = rotation_from_wxyz(qpos[:, 3:7]).apply([1.0, 0.0, 0.0])
-    return Rotation.from_euler("z", np.arctan2(x[:, 1], x[:, 0])[:, None])
+def heading_yaw(qpos):
+    """(N,) the root's heading: the yaw of the root's x-axis about z."""
+    R = rotation_matrix(qpos[:, 3:7])
+    return namespace(qpos).arctan2(R[:, 1, 0], R[:, 0, 0])
 
 
-def root_command_to(qpos: np.ndarray, target_qpos: np.ndarray, target_vel: np.ndarray) -> np.ndarray:
+def to_heading(v, yaw):
+    """(N, 3, ...) vectors ``v`` (N, 3, ...) in the world seen from the heading frame of ``yaw`` (N,)."""
+    xp = namespace(v)
+    shape = (-1, *(1,) * (v.ndim - 2))
+    c, s = xp.cos(yaw).reshape(shape), xp.sin(yaw).reshape(shape)
+    return xp.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]], 1)
+
+
+def root_command_to(qpos, target_qpos, target_vel):
     """(N, 12) ``[H^T (p* - p), rot6d(H^T R*), H^T v*]``: the target root (position ``p*``, orientation ``R*`` of
     ``target_qpos (N, 7+)``, linear velocity ``v* (N, 3)``) seen from the heading frame ``H`` of ``qpos (N, 7+)``."""
-    h_inv = heading(qpos).inv()
-    dpos = h_inv.apply(target_qpos[:, :3] - qpos[:, :3])
-    rot6d = rot6((h_inv * rotation_from_wxyz(target_qpos[:, 3:7])).as_matrix())
-    return np.concatenate([dpos, rot6d, h_inv.apply(target_vel[:, :3])], axis=1)
+    yaw = heading_yaw(qpos)
+    dpos = to_heading(target_qpos[:, :3] - qpos[:, :3], yaw)
+    rot = to_heading(rotation_matrix(target_qpos[:, 3:7]), yaw)
+    return concat([dpos, rot6(rot), to_heading(target_vel[:, :3], yaw)], namespace(qpos), axis=1)
 
 
 def command_frames(frames: int, fps: float, horizon_s: float = 1.0) -> np.ndarray:

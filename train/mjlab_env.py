@@ -1,0 +1,434 @@
+"""Post-training on mjlab (MuJoCo Warp, ``--backend mjlab``): the environment of :mod:`train.post_env` as an mjlab
+``ManagerBasedRlEnv`` over ``N`` worlds, so a GPU steps thousands of episodes at once. Nothing is written twice:
+
+* **scene**: the robot of :func:`pipeline.scene.build_spec` (the episodes' actuator profile, the floor, the solver
+  options) and the object of :func:`pipeline.scene.object_spec`, as two mjlab entities; the joint targets go
+  through mjlab's joint-position action (absolute targets, scale 1) with the actuation noise added;
+* **observations, rewards, terminations**: plain term functions calling the CPU environment's own functions on
+  torch tensors read from the warp data (:mod:`pipeline.terms.observations`, :mod:`pipeline.terms.interaction`,
+  :func:`pipeline.terms.link_motion.link_velocity`, the box field of :mod:`pipeline.distance.primitive`,
+  :mod:`train.rewards`, the fall test of :mod:`physicalize.rollout`); ``policy`` is the ``l``-step windows in
+  :func:`train.rl_model.flatten_windows`'s layout (mjlab's per-term history), ``critic`` the current step;
+* **episodes**: a start draws the episode and its :class:`train.randomize.Variation` and builds the first state with
+  the CPU environment's numpy code (:func:`train.randomize.draw`, :func:`train.episodes.scaled_objects`,
+  :func:`train.randomize.perturb_initial_state`), then writes it into the world with the object's size, mass,
+  inertia and friction (per-world model fields); the command offset (:func:`train.randomize.turn`) and the
+  perception noise apply every step in torch.
+
+:class:`MjlabPostTrainEnv` is rsl_rl's ``VecEnv`` over it with :class:`train.post_env.PostTrainEnv`'s observations
+and extras, so :mod:`train.aip` trains either. Not on this backend yet (a one-line error, or left out and said so):
+objects other than one free box (chairs, meshes: mjlab fixes a world's geom types at start-up; meshes need
+mjlab's pre-built variants), the box drawn as a cylinder, restitution, and the fall test reads the torso's
+orientation one physics step stale (mjlab computes terminations before its single ``forward``).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, replace
+
+import mujoco
+import numpy as np
+import torch
+from mjlab.actuator.xml_actuator import XmlActuatorCfg
+from mjlab.entity import EntityArticulationInfoCfg, EntityCfg
+from mjlab.envs import ManagerBasedRlEnv, ManagerBasedRlEnvCfg
+from mjlab.envs.mdp.actions import JointPositionAction, JointPositionActionCfg
+from mjlab.managers import (
+    EventTermCfg,
+    ObservationGroupCfg,
+    ObservationTermCfg,
+    RewardTermCfg,
+    TerminationTermCfg,
+)
+from mjlab.managers.event_manager import RecomputeLevel, requires_model_fields
+from mjlab.scene import SceneCfg
+from mjlab.sim import MujocoCfg, SimulationCfg
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from features.compute import FeatureConfig
+from physicalize.rollout import FALL_HEIGHT_DROP, FALL_TILT_COS, SUBSTEPS
+from pipeline.distance.primitive import box_local
+from pipeline.errors import InputError
+from pipeline.geometry import Primitive
+from pipeline.robot import NQ_ROBOT, NUM_JOINTS, NV_ROBOT
+from pipeline.scene import IMPRATIO, PHYSICS_TIMESTEP, SceneObject, build_spec, object_spec
+from pipeline.terms.interaction import interaction_features
+from pipeline.terms.link_motion import link_motion, link_velocity
+from pipeline.terms.observations import command_frames, proprioception, root_command_to, rotation_matrix
+from train import rewards as R
+from train.episodes import Episode, scaled_objects
+from train.post_env import AMP_STATE, PostEnvConfig
+from train.randomize import (
+    RandomizationConfig,
+    Variation,
+    actuation_noise,
+    draw,
+    object_physics,
+    perception_noise,
+    perturb_initial_state,
+    turn,
+)
+
+DF_START = 2 * NUM_JOINTS + 6 + NUM_JOINTS + 12
+"""Where the DF features start in the ``critic`` row ``[proprio (93), root_command (12), df]``."""
+
+CONTACTS, CONSTRAINT_ROWS = 64, 512
+"""Per world: MuJoCo Warp allocates contacts and constraint rows up front (the G1 standing with a box in its hands
+needed up to 96 rows with elliptic cones in a first 2-world run; past the limit contacts are dropped)."""
+
+MODEL_FIELDS = ("geom_size", "geom_rbound", "geom_aabb", "geom_friction", "body_mass", "body_inertia")
+"""The object's model fields each world holds its own copy of (its episode's size, mass and friction)."""
+
+
+def check_box_episodes(episodes: list[Episode]) -> None:
+    """One-line error for an episode this backend cannot run: anything but one box primitive."""
+    for e in episodes:
+        if not _is_box(e):
+            objects = e.simulated.robot.objects
+            what = type(objects[0].geometry).__name__ if len(objects) == 1 else f"{len(objects)} objects"
+            raise InputError(e.simulated.robot.source, "objects", f"the mjlab backend runs one free box, not {what}")
+
+
+def _is_box(e: Episode) -> bool:
+    objects = e.simulated.robot.objects
+    return len(objects) == 1 and isinstance(objects[0].geometry, Primitive) and objects[0].geometry.kind == "box"
+
+
+def runnable_episodes(episodes: list[Episode]) -> list[Episode]:
+    """The episodes this backend runs (one box); says on stderr how many it leaves to the CPU backend, and is a
+    one-line error when none is left."""
+    keep = [e for e in episodes if _is_box(e)]
+    if not keep:
+        check_box_episodes(episodes)
+    if len(keep) < len(episodes):
+        left = sorted({e.task for e in episodes if not _is_box(e)})
+        print(f"mjlab backend: {len(keep)} of {len(episodes)} episodes; {', '.join(left)} (not one box) run on the "
+              "CPU backend only", file=sys.stderr)  # fmt: skip
+    return keep
+
+
+def check_device(device: str) -> None:
+    """One-line error for a device mjlab cannot use: CUDA asked for and none visible."""
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        why = "the mjlab backend needs a CUDA GPU and torch sees none; --device cpu runs it slowly (a smoke test)"
+        raise InputError(None, "device", why)
+
+
+class Worlds:
+    """The episodes' reference tracks on the device (padded with their last frame to the longest) and what each
+    world runs: its episode, the object's size and height shift at the drawn scale, the command offset.
+
+    ``start(env, ids, assignments)`` writes episodes into worlds; :func:`start_episodes` draws them."""
+
+    def __init__(self, episodes: list[Episode], envs: int, randomization: RandomizationConfig, seed: int,
+                 device: str, horizon_s: float = FeatureConfig().root_horizon_s):  # fmt: skip
+        check_box_episodes(episodes)
+        self.episodes, self.randomization, self.device = episodes, randomization, torch.device(device)
+        self.rng = np.random.default_rng([seed, 7])
+        self.torch_rng = torch.Generator(device=self.device).manual_seed(seed)
+        frames = [e.simulated.frames for e in episodes]
+        longest = max(frames)
+
+        def pad(a: np.ndarray) -> torch.Tensor:
+            a = np.concatenate([a, np.repeat(a[-1:], longest - len(a), axis=0)])
+            return torch.as_tensor(a, dtype=torch.float32 if a.dtype.kind == "f" else torch.long, device=device)
+
+        def stack(f) -> torch.Tensor:
+            return torch.stack([pad(np.asarray(f(e))) for e in episodes])
+
+        self.frames = torch.as_tensor(frames, device=device)
+        self.qpos = stack(lambda e: e.simulated.robot.qpos)
+        self.qvel = stack(lambda e: e.simulated.qvel)
+        self.object = stack(lambda e: e.simulated.robot.objects[0].pose)
+        self.command = stack(lambda e: command_frames(e.simulated.frames, e.simulated.robot.fps, horizon_s))
+        self.torso_up = stack(lambda e: _torso_up(e.simulated))
+        self.episode = torch.zeros(envs, dtype=torch.long, device=device)
+        self.half = torch.ones(envs, 3, device=device)
+        self.dz = torch.zeros(envs, device=device)
+        self.command_offset = torch.zeros(envs, 3, device=device)
+
+    def index(self, env: ManagerBasedRlEnv) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(episode, frame)`` per world: the reference frame ``min(t, T - 1)`` at the world's step ``t``."""
+        e = self.episode
+        return e, torch.minimum(env.episode_length_buf, self.frames[e] - 1)
+
+    def draw(self, n: int) -> list[tuple[int, Variation]]:
+        """``n`` starts as the CPU environment draws them (the box stays a box: no cylinder, no restitution yet)."""
+        out = []
+        for _ in range(n):
+            v = replace(draw(self.randomization, self.rng), cylinder=False, restitution=0.0)
+            out.append((int(self.rng.integers(len(self.episodes))), v))
+        return out
+
+    def start(self, env: ManagerBasedRlEnv, ids: torch.Tensor, assignments: list[tuple[int, Variation]]) -> None:
+        """Worlds ``ids`` start episode ``assignments[i] = (episode index, variation)``: the first state as
+        :class:`train.env._Slot` builds it, and the object's model fields."""
+        jnt_range = env.sim.mj_model.jnt_range[1 : 1 + NUM_JOINTS]
+        qpos, qvel, half, mass, friction, dz = [], [], [], [], [], []
+        for e, v in assignments:
+            sim = self.episodes[e].simulated
+            o = scaled_objects(sim.robot.objects, v.scale)[0]
+            q = np.concatenate([sim.robot.qpos[0], o.pose[0]])
+            perturb_initial_state(q, jnt_range, [NQ_ROBOT], v)
+            qpos.append(q)
+            qvel.append(np.concatenate([sim.qvel[0], np.zeros(6)]))
+            physics = object_physics(o, v)
+            half.append(o.geometry.half_extents)
+            mass.append(physics.mass)
+            friction.append(physics.friction)
+            dz.append(o.pose[0, 2] - sim.robot.objects[0].pose[0, 2])
+            self.command_offset[ids[len(dz) - 1]] = torch.as_tensor(v.command_offset, device=self.device)
+        as_t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32, device=self.device)  # noqa: E731
+        self.episode[ids] = torch.as_tensor([e for e, _ in assignments], device=self.device)
+        self.half[ids], self.dz[ids] = as_t(half), as_t(dz)
+        d, m = env.sim.data, env.sim.model
+        d.qpos[ids], d.qvel[ids] = as_t(qpos), as_t(qvel)
+        obj = env.scene["object"]
+        g, b = obj.indexing.geom_ids[0], obj.indexing.body_ids[0]
+        h, mass = as_t(half), as_t(mass)
+        m.geom_size[ids, g] = h
+        m.geom_rbound[ids, g] = h.norm(dim=1)
+        m.geom_aabb[ids, g] = torch.stack([torch.zeros_like(h), h], 1)  # (centre, half-size)
+        m.geom_friction[ids, g, 0] = as_t(friction)
+        m.body_mass[ids, b] = mass
+        m.body_inertia[ids, b] = mass[:, None] / 3 * (h.square().sum(1, keepdim=True) - h.square())
+
+
+def _torso_up(sim) -> np.ndarray:
+    """(T, 3) the reference torso's up-axis per frame (the fall test's reference)."""
+    return link_motion(sim.robot.qpos, sim.qvel, ("torso_link",)).rot[:, 0, :, 2]
+
+
+@requires_model_fields(*MODEL_FIELDS, recompute=RecomputeLevel.set_const)
+def start_episodes(env: ManagerBasedRlEnv, env_ids: torch.Tensor | None, worlds: Worlds) -> None:
+    """Reset event: each world in ``env_ids`` starts a drawn episode (:meth:`Worlds.draw`)."""
+    ids = torch.arange(env.num_envs, device=env.device) if env_ids is None else env_ids
+    worlds.start(env, ids, worlds.draw(len(ids)))
+
+
+class NoisyJointTargets(JointPositionAction):
+    """mjlab's joint-position action with the actuation noise (:func:`train.randomize.actuation_noise`)."""
+
+    def process_actions(self, actions: torch.Tensor) -> None:
+        super().process_actions(actuation_noise(actions, self.cfg.sigma, self.cfg.worlds.torch_rng))
+
+
+@dataclass(kw_only=True)
+class NoisyJointTargetsCfg(JointPositionActionCfg):
+    """Absolute joint targets (scale 1, no offset) with Gaussian noise ``sigma`` [rad] from ``worlds``' generator."""
+
+    scale: float = 1.0
+    use_default_offset: bool = False
+    sigma: float = 0.0
+    worlds: Worlds | None = None
+
+    def build(self, env: ManagerBasedRlEnv) -> NoisyJointTargets:
+        return NoisyJointTargets(self, env)
+
+
+# -- observation terms ---------------------------------------------------------------------------------------------
+
+
+def _robot(env: ManagerBasedRlEnv) -> tuple[torch.Tensor, torch.Tensor]:
+    return env.sim.data.qpos[:, :NQ_ROBOT], env.sim.data.qvel[:, :NV_ROBOT]
+
+
+def applied_targets(env: ManagerBasedRlEnv) -> torch.Tensor:
+    """(N, 29) the joint targets the last step applied (after the actuation noise); 0 before an episode's first."""
+    a = env.action_manager.get_term("joints").raw_action  # scale 1, no offset: the targets, after the noise
+    return torch.where(env.episode_length_buf[:, None] > 0, a, torch.zeros_like(a))
+
+
+def proprio(env: ManagerBasedRlEnv) -> torch.Tensor:
+    """(N, 93) :func:`pipeline.terms.observations.proprioception`."""
+    return proprioception(*_robot(env), applied_targets(env))
+
+
+def root_command(env: ManagerBasedRlEnv, worlds: Worlds) -> torch.Tensor:
+    """(N, 12) the root command to the episode's root ``horizon`` ahead, turned by the world's command offset."""
+    e, k = worlds.index(env)
+    j = worlds.command[e, k]
+    target = turn(worlds.qpos[e, j, :7], worlds.command_offset)
+    return root_command_to(_robot(env)[0], target, worlds.qvel[e, j, :3])
+
+
+def interaction(env: ManagerBasedRlEnv, worlds: Worlds, links: tuple[str, ...]) -> torch.Tensor:
+    """(N, 10 K) u_t per DF link (:func:`pipeline.terms.interaction.interaction_features`) against the world's box:
+    the link points in the box frame, the box field at the world's half-extents, its gradient back in the world."""
+    d, robot = env.sim.data, env.scene["robot"]
+    ids = robot.indexing.body_ids[robot.find_bodies(list(links), preserve_order=True)[0]]
+    pos = d.xpos[:, ids]
+    vel = link_velocity(pos, d.cvel[:, ids], d.subtree_com[:, robot.indexing.root_body_id][:, None])
+    pose = d.qpos[:, NQ_ROBOT : NQ_ROBOT + 7]
+    rot = rotation_matrix(pose[:, 3:7])
+    local = torch.einsum("nji,nkj->nki", rot, pos - pose[:, None, :3])
+    h = worlds.half[:, None, :].expand_as(local)
+    phi, g, _ = box_local(*local.unbind(-1), *h.unbind(-1), torch)
+    grad = torch.einsum("nij,nkj->nki", rot, torch.stack(g, -1))
+    return interaction_features(phi, grad, vel).reshape(len(pos), -1)
+
+
+def interaction_seen(env: ManagerBasedRlEnv, worlds: Worlds, links: tuple[str, ...]) -> torch.Tensor:
+    """:func:`interaction` with the perception noise: what the policy reads."""
+    return perception_noise(interaction(env, worlds, links), worlds.randomization.df_noise, worlds.torch_rng)
+
+
+# -- reward and termination terms ------------------------------------------------------------------------------------
+
+
+def root_tracking(env: ManagerBasedRlEnv, worlds: Worlds) -> torch.Tensor:
+    e, k = worlds.index(env)
+    return R.root_tracking(_robot(env)[0][:, :3], worlds.qpos[e, k, :3])
+
+
+def object_tracking(env: ManagerBasedRlEnv, worlds: Worlds, sigma: float) -> torch.Tensor:
+    e, k = worlds.index(env)
+    target = worlds.object[e, k, :3] + torch.stack([0 * worlds.dz, 0 * worlds.dz, worlds.dz], 1)
+    return R.object_tracking(env.sim.data.qpos[:, NQ_ROBOT : NQ_ROBOT + 3], target, sigma)
+
+
+def action_rate(env: ManagerBasedRlEnv) -> torch.Tensor:
+    """The policy's targets against the step before's; 0 on an episode's first step (as the CPU environment)."""
+    a, last = env.action_manager.action, env.action_manager.prev_action
+    return torch.where(env.episode_length_buf <= 1, 0.0, R.action_rate(a, last))
+
+
+def termination(env: ManagerBasedRlEnv) -> torch.Tensor:
+    m = env.termination_manager
+    return R.termination(m.terminated, m.time_outs)
+
+
+def joint_limits(env: ManagerBasedRlEnv, soft: float) -> torch.Tensor:
+    lower, upper = torch.as_tensor(env.sim.mj_model.jnt_range[1 : 1 + NUM_JOINTS].T, device=env.device)
+    return R.joint_limits(_robot(env)[0][:, 7:], lower, upper, soft)
+
+
+def fell(env: ManagerBasedRlEnv, worlds: Worlds) -> torch.Tensor:
+    """:func:`physicalize.rollout.fallen` per world: the pelvis too low or the torso tilted from the reference's."""
+    e, k = worlds.index(env)
+    robot = env.scene["robot"]
+    torso = robot.indexing.body_ids[robot.find_bodies(["torso_link"])[0][0]]
+    up = env.sim.data.xmat[:, torso].reshape(-1, 3, 3)[:, :, 2]
+    low = _robot(env)[0][:, 2] < worlds.qpos[e, k, 2] - FALL_HEIGHT_DROP
+    return low | ((up * worlds.torso_up[e, k]).sum(-1) < FALL_TILT_COS)
+
+
+def reference_end(env: ManagerBasedRlEnv, worlds: Worlds) -> torch.Tensor:
+    return env.episode_length_buf >= worlds.frames[worlds.episode] - 1
+
+
+# -- the environment -----------------------------------------------------------------------------------------------
+
+
+def env_cfg(worlds: Worlds, envs: int, history: int, weights: R.RewardWeights,
+            links: tuple[str, ...] = FeatureConfig().links) -> ManagerBasedRlEnvCfg:  # fmt: skip
+    """The mjlab configuration of ``envs`` worlds over ``worlds``' episodes (module docstring)."""
+    profile = worlds.episodes[0].profile
+    if any(e.profile != profile for e in worlds.episodes):
+        raise InputError(worlds.episodes[0].simulated.robot.source, "actuator_profile", "episodes of two profiles")
+    first = worlds.episodes[0].simulated.robot.objects[0]
+    robot = EntityCfg(
+        spec_fn=lambda: _robot_spec(profile),
+        articulation=EntityArticulationInfoCfg(actuators=(XmlActuatorCfg(target_names_expr=(".*_joint",)),)),
+    )
+    box = EntityCfg(spec_fn=lambda: object_spec(SceneObject("object", first.geometry, first.physics())))
+    w, lw = {"worlds": worlds}, {"worlds": worlds, "links": links}
+
+    def obs(func, params=None, steps=0) -> ObservationTermCfg:
+        return ObservationTermCfg(func=func, params=params or {}, history_length=steps)
+
+    def reward(func, weight: float, **params) -> RewardTermCfg:
+        return RewardTermCfg(func=func, weight=weight, params=params)
+
+    policy = {"proprio": obs(proprio, None, history), "root_command": obs(root_command, w, history),
+              "df": obs(interaction_seen, lw, history)}  # fmt: skip
+    critic = {"proprio": obs(proprio), "root_command": obs(root_command, w), "df": obs(interaction, lw)}
+    frames = int(worlds.frames.max())
+    return ManagerBasedRlEnvCfg(
+        decimation=SUBSTEPS,
+        scene=SceneCfg(num_envs=envs, entities={"robot": robot, "object": box}),
+        sim=SimulationCfg(nconmax=CONTACTS, njmax=CONSTRAINT_ROWS, mujoco=MujocoCfg(**_options())),
+        observations={"policy": ObservationGroupCfg(terms=policy), "critic": ObservationGroupCfg(terms=critic)},
+        actions={
+            "joints": NoisyJointTargetsCfg(
+                entity_name="robot", actuator_names=(".*",), worlds=worlds, sigma=worlds.randomization.action_noise_rad
+            )
+        },  # fmt: skip
+        rewards={
+            "root_tracking": reward(root_tracking, weights.root_tracking, worlds=worlds),
+            "object_tracking": reward(
+                object_tracking, weights.object_tracking, worlds=worlds, sigma=weights.object_sigma_m
+            ),  # fmt: skip
+            "action_rate": reward(action_rate, weights.action_rate),
+            "termination": reward(termination, weights.termination),
+            "joint_limits": reward(joint_limits, weights.joint_limits, soft=weights.soft_limit),
+        },
+        terminations={
+            "fell": TerminationTermCfg(func=fell, params=w),
+            "reference_end": TerminationTermCfg(func=reference_end, params=w, time_out=True),
+        },
+        events={"start_episodes": EventTermCfg(func=start_episodes, mode="reset", params=w)},
+        episode_length_s=(frames + 1) * PHYSICS_TIMESTEP * SUBSTEPS,
+        auto_reset=False,  # restarts after the style samples are taken (MjlabPostTrainEnv.step)
+        scale_rewards_by_dt=False,  # the paper's weights are per step
+    )
+
+
+def _options() -> dict:
+    """:func:`pipeline.scene.build_spec`'s solver options as mjlab's ``MujocoCfg`` (the scene's options are mjlab's
+    to set: an attached spec's are dropped)."""
+    return {"timestep": PHYSICS_TIMESTEP, "integrator": "implicitfast", "cone": "elliptic", "impratio": IMPRATIO}
+
+
+def _robot_spec(profile) -> mujoco.MjSpec:
+    """:func:`pipeline.scene.build_spec`'s robot (actuators, floor) with MuJoCo's default options (:func:`_options`
+    sets them; left in, mjlab warns that it drops them)."""
+    spec, default = build_spec((), profile), mujoco.MjSpec().option
+    for name in ("timestep", "integrator", "cone", "impratio"):
+        setattr(spec.option, name, getattr(default, name))
+    return spec
+
+
+class MjlabPostTrainEnv(VecEnv):
+    """rsl_rl's ``VecEnv`` over the mjlab environment, with :class:`train.post_env.PostTrainEnv`'s observations
+    (``policy`` windows, ``critic`` current step) and extras (``style``, ``time_outs``, ``log``)."""
+
+    def __init__(self, episodes: list[Episode], history: int, config: PostEnvConfig = PostEnvConfig(),
+                 device: str = "cuda"):  # fmt: skip
+        check_device(device)
+        self.worlds = Worlds(episodes, config.envs, config.randomization, config.seed, device)
+        self.env = ManagerBasedRlEnv(env_cfg(self.worlds, config.envs, history, config.weights), device=device)
+        self.obs, _ = self.env.reset()
+        self.cfg, self.device = config, torch.device(device)
+        self.num_envs, self.num_actions = config.envs, NUM_JOINTS
+        self.max_episode_length = int(self.worlds.frames.max())
+        self.weights = {k: v for k, v in config.weights.terms().items() if k in self.env.reward_manager.active_terms}
+
+    @property
+    def episode_length_buf(self) -> torch.Tensor:
+        return self.env.episode_length_buf
+
+    def get_observations(self) -> TensorDict:
+        return TensorDict({k: self.obs[k] for k in ("policy", "critic")}, batch_size=[self.num_envs])
+
+    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+        before = self.obs["critic"][:, AMP_STATE]
+        obs, reward, terminated, time_outs, _ = self.env.step(actions)
+        critic = obs["critic"]
+        style = {"df": critic[:, DF_START:], "transition": torch.cat([before, critic[:, AMP_STATE]], 1)}
+        done = terminated | time_outs
+        log = {f"/reward/{k}": float(v.mean()) / w for (k, w), v in zip(self.weights.items(), self._term_values())}
+        if done.any():
+            obs, _ = self.env.reset(env_ids=done.nonzero().squeeze(1))
+        self.obs = obs
+        extras = {"time_outs": time_outs & ~terminated, "style": style, "log": log}
+        return self.get_observations(), reward, done, extras
+
+    def _term_values(self) -> list[torch.Tensor]:
+        """Each reward term's weighted value this step (mjlab keeps them in ``_step_reward``, column per term)."""
+        return list(self.env.reward_manager._step_reward.T)
+
+    def close(self) -> None:
+        self.env.close()
