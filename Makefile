@@ -18,7 +18,7 @@ RUN_ARGS = -j $(JOBS) --executor $(EXECUTOR)
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install lint format retarget import physicalize train-residual features corpus train-bc train-aip eval test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-train bench-features clean-venv
+.PHONY: install lint format retarget import physicalize train-residual features corpus train-bc train-aip eval test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-train bench-train-mjlab bench-features clean-venv
 
 install: $(VENV)/.installed
 
@@ -138,6 +138,11 @@ bench-physicalize-real: install
 
 bench-train: install
 	$(PY) bench/bench_train.py --name $(NAME)
+
+# The mjlab backend's speed on a CUDA GPU (bench/bench_train_mjlab.py): physics alone, the environment, and PPO
+# plain / + randomisations / + priors at 4096 worlds, from POLICY (a BC + DAgger policy.pt).
+bench-train-mjlab: install
+	$(PY) bench/bench_train_mjlab.py --name $(CORPUS) --policy $(POLICY)
 
 bench-features: install
 	$(PY) bench/bench_features.py

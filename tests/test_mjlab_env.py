@@ -11,7 +11,7 @@ from pipeline.errors import InputError
 from train import rewards as R
 from train.env import EnvConfig, InteractionEnv
 from train.post_env import PostEnvConfig, task_rewards
-from train.randomize import RandomizationConfig, draw
+from train.randomize import RandomizationConfig, draw, stack
 
 pytestmark = pytest.mark.slow
 
@@ -48,7 +48,7 @@ def test_the_same_state_gives_the_same_observation_and_reward(box_episodes, mjla
 
     env, worlds = mjlab_env.env, mjlab_env.worlds
     ids = torch.arange(2)
-    worlds.start(env, ids, assignments)
+    worlds.start(env, ids, torch.tensor([e for e, _ in assignments]), stack([v for _, v in assignments]))
     d = env.sim.data
     d.qpos[:] = torch.as_tensor(np.stack([s.data.qpos for s in cpu.slots]), dtype=torch.float32)
     d.qvel[:] = torch.as_tensor(np.stack([s.data.qvel for s in cpu.slots]), dtype=torch.float32)
@@ -70,7 +70,7 @@ def test_the_same_state_gives_the_same_observation_and_reward(box_episodes, mjla
         "object_tracking": M.object_tracking(env, worlds, R.RewardWeights().object_sigma_m),
         "action_rate": M.action_rate(env),
         "termination": M.termination(env),
-        "joint_limits": M.joint_limits(env, R.RewardWeights().soft_limit),
+        "joint_limits": M.joint_limits(env, worlds, R.RewardWeights().soft_limit),
     }
     for k, v in terms.items():
         assert float(v.mean()) == pytest.approx(want_terms[k], rel=1e-4, abs=1e-6), k

@@ -87,3 +87,31 @@ def test_actuation_and_perception_noise_have_their_spread_per_part():
     std = noisy.std(axis=(0, 1))
     np.testing.assert_allclose(std, [0.005] + [0.02] * 3 + [0.05] * 6, rtol=0.05)
     assert perception_noise(df, (0.0, 0.0, 0.0), rng) is df
+
+
+def test_the_gpu_backend_draws_and_perturbs_with_the_same_functions_in_torch():
+    """draw_batch with a torch.Generator stays in the ranges and repeats for a seed; perturbed_initial_state gives
+    the same scenes in numpy and torch."""
+    import torch
+
+    from train.randomize import draw_batch, perturbed_initial_state, stack
+
+    cfg = RandomizationConfig()
+    b = draw_batch(cfg, 500, torch.Generator().manual_seed(3))
+    again = draw_batch(cfg, 500, torch.Generator().manual_seed(3))
+    assert all(torch.equal(b[k], again[k]) for k in b)
+    assert 0.4 <= float(b["scale"].min()) and float(b["scale"].max()) <= 1.6 and b["scale"].shape == (500, 3)
+    assert float(b["joint_noise"].abs().max()) <= 0.03 and float(b["command_offset"][:, 2].abs().max()) <= 0.05
+    assert 0.4 < float(b["cylinder"].double().mean()) < 0.6
+    variations = [draw(cfg, np.random.default_rng(s)) for s in range(4)]
+    qpos = np.tile(np.concatenate([[0.1, 0.2, 0.79, 1, 0, 0, 0], np.full(29, 0.5), BOX.pose[0]]), (4, 1))
+    joint_range = np.tile([-0.52, 0.52], (29, 1))
+    s = stack(variations)
+    args = [s["robot_offset"], s["object_offset"], s["joint_noise"]]
+    want = perturbed_initial_state(qpos, joint_range, [36], *args)
+    got = perturbed_initial_state(torch.as_tensor(qpos), joint_range, [36], *map(torch.as_tensor, args))
+    np.testing.assert_allclose(got.numpy(), want, atol=1e-12)
+    one = qpos[0].copy()
+    perturb_initial_state(one, joint_range, [36], variations[0])
+    np.testing.assert_array_equal(one, want[0])
+    assert float(want[:, 7:36].max()) <= 0.52

@@ -76,22 +76,43 @@ class Variation:
 
 
 def draw(cfg: RandomizationConfig, rng: np.random.Generator) -> Variation:
-    """One episode's :class:`Variation` under ``cfg``."""
+    """One episode's :class:`Variation` under ``cfg`` (the first row of :func:`draw_batch`)."""
+    b = draw_batch(cfg, 1, rng)
+    row = {k: v[0].tolist() for k, v in b.items()}
+    return Variation(**{k: tuple(v) if isinstance(v, list) else v for k, v in row.items()})
 
-    def offset(xy: float, yaw: float) -> tuple[float, float, float]:
-        return tuple(float(v) for v in rng.uniform(-1, 1, 3) * (xy, xy, yaw))
 
-    return Variation(
-        scale=tuple(float(v) for v in rng.uniform(*cfg.scale, 3)),
-        cylinder=bool(rng.random() < cfg.cylinder_prob),
-        mass_factor=float(rng.uniform(*cfg.mass_factor)),
-        friction_factor=float(rng.uniform(*cfg.friction_factor)),
-        restitution=float(rng.uniform(*cfg.restitution)),
-        robot_offset=offset(cfg.robot_xy_m, cfg.robot_yaw_rad),
-        object_offset=offset(cfg.object_xy_m, cfg.object_yaw_rad),
-        command_offset=offset(cfg.command_xy_m, cfg.command_yaw_rad),
-        joint_noise=tuple(float(v) for v in rng.uniform(-1, 1, NUM_JOINTS) * cfg.joint_noise_rad),
-    )
+def draw_batch(cfg: RandomizationConfig, n: int, rng) -> dict:
+    """``n`` episodes' draws at once: :class:`Variation`'s fields as arrays with a leading ``(n,)`` axis, numpy with
+    a numpy ``rng``, torch with a ``torch.Generator`` (on its device: the mjlab backend draws its restarts there)."""
+
+    def uniform(lo: float, hi: float, *shape: int):
+        if isinstance(rng, np.random.Generator):
+            return rng.uniform(lo, hi, (n, *shape))
+        import torch
+
+        return lo + (hi - lo) * torch.rand((n, *shape), generator=rng, device=rng.device, dtype=torch.float64)
+
+    def offset(xy: float, yaw: float):
+        a = uniform(-1.0, 1.0, 3)
+        return a * as_float([xy, xy, yaw], namespace(a), like=a)
+
+    return {
+        "scale": uniform(*cfg.scale, 3),
+        "cylinder": uniform(0.0, 1.0) < cfg.cylinder_prob,
+        "mass_factor": uniform(*cfg.mass_factor),
+        "friction_factor": uniform(*cfg.friction_factor),
+        "restitution": uniform(*cfg.restitution),
+        "robot_offset": offset(cfg.robot_xy_m, cfg.robot_yaw_rad),
+        "object_offset": offset(cfg.object_xy_m, cfg.object_yaw_rad),
+        "command_offset": offset(cfg.command_xy_m, cfg.command_yaw_rad),
+        "joint_noise": uniform(-1.0, 1.0, NUM_JOINTS) * cfg.joint_noise_rad,
+    }
+
+
+def stack(variations: list[Variation]) -> dict[str, np.ndarray]:
+    """Episodes' :class:`Variation` s as :func:`draw_batch`'s arrays."""
+    return {f.name: np.array([getattr(v, f.name) for v in variations]) for f in fields(Variation)}
 
 
 def vary_shape(o: ObjectTrack, v: Variation) -> ObjectTrack:
@@ -134,13 +155,25 @@ def _turn(qpos7: np.ndarray, offset: tuple[float, float, float]) -> None:
 
 
 def perturb_initial_state(qpos: np.ndarray, joint_range: np.ndarray, object_adr: list[int], v: Variation) -> None:
-    """In place on a scene's ``qpos``: the robot's root and each free object shifted and turned (about their own
-    origin), the joints moved by ``v.joint_noise`` and kept inside ``joint_range`` (29, 2)."""
-    _turn(qpos[:7], v.robot_offset)
-    q = qpos[7:NQ_ROBOT] + np.asarray(v.joint_noise)
-    qpos[7:NQ_ROBOT] = np.clip(q, joint_range[:, 0], joint_range[:, 1])
+    """In place on one scene's ``qpos``: :func:`perturbed_initial_state` of ``v``."""
+    b = stack([v])
+    keys = ("robot_offset", "object_offset", "joint_noise")
+    qpos[:] = perturbed_initial_state(qpos[None], joint_range, object_adr, *(b[k] for k in keys))[0]
+
+
+def perturbed_initial_state(qpos, joint_range, object_adr: list[int], robot_offset, object_offset, joint_noise):
+    """(N, nq) scenes' first ``qpos`` with the robot's root and each free object (at ``object_adr``) shifted and
+    turned about their own origin (:func:`turn` by ``robot_offset`` / ``object_offset``, (N, 3)) and the joints moved
+    by ``joint_noise`` (N, 29), kept inside ``joint_range`` (29, 2); numpy or torch alike."""
+    xp = namespace(qpos)
+    out = qpos * 1.0
+    out[:, :7] = turn(qpos[:, :7], robot_offset)
+    lo, hi = (as_float(joint_range[:, k], xp, like=qpos) for k in (0, 1))
+    q = qpos[:, 7:NQ_ROBOT] + joint_noise
+    out[:, 7:NQ_ROBOT] = xp.minimum(xp.maximum(q, lo), hi)
     for adr in object_adr:
-        _turn(qpos[adr : adr + 7], v.object_offset)
+        out[:, adr : adr + 7] = turn(qpos[:, adr : adr + 7], object_offset)
+    return out
 
 
 def perturb_command(target_qpos: np.ndarray, v: Variation) -> np.ndarray:
