@@ -145,3 +145,22 @@ def test_zero_scale_is_rejected_naming_the_object():
     d["scale"] = [1.0, 0.0, 1.0]
     with pytest.raises(InputError, match=r"^<memory>: crate geometry: scale must be three positive"):
         ObjectField.from_geometry(d, name="crate")
+
+
+def test_boxes_of_their_own_sizes_in_one_batch_match_one_field_each():
+    """boxes_query_links (the environments' batch of differently scaled boxes) gives each box's own ObjectField
+    answer, in numpy and in torch, points inside the boxes included."""
+    from pipeline.distance.field import boxes_query_links
+
+    halves = RNG.uniform(0.05, 0.4, (5, 3))
+    poses = np.stack([_pose(s) for s in range(5)])
+    points = poses[:, None, :3] + RNG.normal(scale=0.3, size=(5, 14, 3))
+    phi, grad = boxes_query_links(points, poses, halves)
+    for n in range(5):
+        want = ObjectField.from_geometry(Primitive("box", tuple(halves[n]))).query(points[n], poses[n])
+        np.testing.assert_allclose(phi[n], want.phi, atol=1e-12)
+        np.testing.assert_allclose(grad[n], want.grad, atol=1e-12)
+    assert (phi > 0).any() and (np.abs(phi) < halves.max()).any()
+    t_phi, t_grad = boxes_query_links(*(torch.as_tensor(a) for a in (points, poses, halves)))
+    np.testing.assert_allclose(t_phi.numpy(), phi, atol=1e-12)
+    np.testing.assert_allclose(t_grad.numpy(), grad, atol=1e-12)

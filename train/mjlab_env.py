@@ -56,14 +56,14 @@ from tensordict import TensorDict
 
 from features.compute import FeatureConfig
 from physicalize.rollout import FALL_HEIGHT_DROP, FALL_TILT_COS, SUBSTEPS
-from pipeline.distance.primitive import box_local
+from pipeline.distance.field import boxes_query_links
 from pipeline.errors import InputError
 from pipeline.geometry import Primitive
 from pipeline.robot import NQ_ROBOT, NUM_JOINTS, NV_ROBOT
 from pipeline.scene import IMPRATIO, PHYSICS_TIMESTEP, SceneObject, build_spec, object_spec
 from pipeline.terms.interaction import interaction_features
 from pipeline.terms.link_motion import link_motion, link_velocity
-from pipeline.terms.observations import command_frames, proprioception, root_command_to, rotation_matrix
+from pipeline.terms.observations import command_frames, proprioception, root_command_to
 from train import rewards as R
 from train.episodes import Episode
 from train.post_env import AMP_STATE, PostEnvConfig
@@ -269,17 +269,12 @@ def root_command(env: ManagerBasedRlEnv, worlds: Worlds) -> torch.Tensor:
 
 
 def interaction(env: ManagerBasedRlEnv, worlds: Worlds, links: tuple[str, ...]) -> torch.Tensor:
-    """(N, 10 K) u_t per DF link (:func:`pipeline.terms.interaction.interaction_features`) against the world's box:
-    the link points in the box frame, the box field at the world's half-extents, its gradient back in the world."""
+    """(N, 10 K) u_t per DF link (:func:`pipeline.terms.interaction.interaction_features`) against the world's box
+    at its half-extents (:func:`pipeline.distance.field.boxes_query_links`, as the CPU environment queries boxes)."""
     d, ids = env.sim.data, worlds.bodies(env, links)
     pos = d.xpos[:, ids]
     vel = link_velocity(pos, d.cvel[:, ids], d.subtree_com[:, env.scene["robot"].indexing.root_body_id][:, None])
-    pose = d.qpos[:, NQ_ROBOT : NQ_ROBOT + 7]
-    rot = rotation_matrix(pose[:, 3:7])
-    local = torch.einsum("nji,nkj->nki", rot, pos - pose[:, None, :3])
-    h = worlds.half[:, None, :].expand_as(local)
-    phi, g, _ = box_local(*local.unbind(-1), *h.unbind(-1), torch)
-    grad = torch.einsum("nij,nkj->nki", rot, torch.stack(g, -1))
+    phi, grad = boxes_query_links(pos, d.qpos[:, NQ_ROBOT : NQ_ROBOT + 7], worlds.half)
     return interaction_features(phi, grad, vel).reshape(len(pos), -1)
 
 

@@ -214,3 +214,21 @@ class ObjectFields:
             closest = xp.where(near[..., None], s.closest, closest)
             index = xp.where(near, m, index)
         return NearestSample(phi, grad, closest, index)
+
+
+def boxes_query_links(points, poses, half) -> tuple[Any, Any]:
+    """``(phi (N, K), grad (N, K, 3))`` of N boxes of their own half-extents ``half`` (N, 3), each at its pose
+    ``poses`` (N, 7), for their K points ``points`` (N, K, 3): one batch where each box size would otherwise be its
+    own :class:`ObjectField` (a post-training episode draws its own scale). The pose transform is
+    :meth:`ObjectField._chunk`'s, the field :func:`pipeline.distance.primitive.box_local`; numpy or torch alike
+    (the CPU environment and the mjlab backend share it)."""
+    from pipeline.distance.primitive import box_local
+
+    xp = namespace(points)
+    t = [poses[:, None, i] for i in range(3)]
+    R = rotation_rows(poses[:, None, 3:7], xp)
+    X, Y, Z = points[..., 0] - t[0], points[..., 1] - t[1], points[..., 2] - t[2]
+    local = [R[0][j] * X + R[1][j] * Y + R[2][j] * Z for j in range(3)]
+    phi, g, _ = box_local(*local, half[:, None, 0], half[:, None, 1], half[:, None, 2], xp)
+    grad = xp.stack([R[i][0] * g[0] + R[i][1] * g[1] + R[i][2] * g[2] for i in range(3)], -1)
+    return phi, grad
