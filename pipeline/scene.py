@@ -37,6 +37,7 @@ import numpy as np
 import trimesh
 
 from pipeline.collision_mesh import collision_parts, load_mesh
+from pipeline.distance.array_ns import namespace
 from pipeline.geometry import Chair, MeshGeometry, ObjectGeometry, ObjectPhysics, Primitive
 from pipeline.robot import G1_JOINT_NAMES, ActuatorProfile, actuator_profile, g1_spec
 
@@ -80,14 +81,23 @@ class Scene:
 RESTITUTION_CONTACT_FREQ = 60.0
 
 
+RESTITUTION_SOLIMP = (0.99, 0.99, 0.001, 0.5, 2.0)
+
+
 def restitution_damping_ratio(e: float) -> float:
     """Contact damping ratio ``zeta`` giving a coefficient of restitution ``e`` in [0, 1)."""
     if not 0.0 <= e < 1.0:
         raise ValueError(f"restitution must be in [0, 1), got {e}")
-    if e == 0.0:
-        return 1.0
-    le = math.log(e)
-    return -le / math.sqrt(math.pi**2 + le**2)
+    return float(restitution_solref(np.float64(e))[1]) / (-2.0 * RESTITUTION_CONTACT_FREQ) if e > 0 else 1.0
+
+
+def restitution_solref(e):
+    """(..., 2) MuJoCo's direct ``solref = (-w^2, -2 zeta w)`` of a contact spring with restitution ``e`` (...) in
+    (0, 1), ``zeta = -ln e / sqrt(pi^2 + ln^2 e)``; numpy or torch alike (the mjlab backend draws ``e`` per world)."""
+    xp, w = namespace(e), RESTITUTION_CONTACT_FREQ
+    le = xp.log(e)
+    zeta = -le / xp.sqrt(math.pi**2 + le**2)
+    return xp.stack([0.0 * zeta - w * w, -2.0 * zeta * w], -1)
 
 
 def _apply_robot_collisions(spec: mujoco.MjSpec) -> None:
@@ -174,13 +184,13 @@ def _add_object(spec: mujoco.MjSpec, obj: SceneObject) -> None:
     else:
         raise TypeError(f"object {obj.name}: unsupported geometry {type(geo).__name__}")
     total = sum(v for _, v in collide)
-    zeta, w = restitution_damping_ratio(phys.restitution), RESTITUTION_CONTACT_FREQ
+    restitution_damping_ratio(phys.restitution)  # its range checked
     for g, vol in collide:
         g.contype = g.conaffinity = 1
         g.condim, g.priority = 3, OBJECT_PRIORITY
         g.friction = [phys.friction, 0.005, 0.0001]
         if phys.restitution > 0:
-            g.solref, g.solimp = [-w * w, -2.0 * zeta * w], [0.99, 0.99, 0.001, 0.5, 2.0]
+            g.solref, g.solimp = restitution_solref(np.float64(phys.restitution)).tolist(), list(RESTITUTION_SOLIMP)
         g.mass = phys.mass * vol / total
         g.rgba = [0.8, 0.5, 0.2, 1.0]
 

@@ -16,8 +16,7 @@ from train.randomize import RandomizationConfig, draw, stack
 pytestmark = pytest.mark.slow
 
 # every randomisation the mjlab worlds run, the per-step noises off so that one state gives one observation
-NO_NOISE = replace(RandomizationConfig(), cylinder_prob=0.0, restitution=(0.0, 0.0), df_noise=(0.0, 0.0, 0.0),
-                   action_noise_rad=0.0)  # fmt: skip
+NO_NOISE = replace(RandomizationConfig(), cylinder_prob=0.0, df_noise=(0.0, 0.0, 0.0), action_noise_rad=0.0)
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +37,9 @@ def test_the_same_state_gives_the_same_observation_and_reward(box_episodes, mjla
     from train import mjlab_env as M
 
     rng = np.random.default_rng(5)
-    assignments = [(i, replace(draw(NO_NOISE, rng), cylinder=False, restitution=0.0)) for i in (0, 1)]
+    assignments = [(i, replace(draw(NO_NOISE, rng), cylinder=False)) for i in (0, 1)]
+    assignments[0] = (0, replace(assignments[0][1], restitution=0.0))  # one world without, one with a contact spring
+    assert assignments[1][1].restitution > 0
     cpu = InteractionEnv(EnvConfig())
     cpu.reset([(box_episodes[e], v.scale, v) for e, v in assignments])
     actions = [np.stack([box_episodes[e].simulated.action[t] for e, _ in assignments]) for t in range(6)]
@@ -62,6 +63,18 @@ def test_the_same_state_gives_the_same_observation_and_reward(box_episodes, mjla
         "root_command": M.root_command(env, worlds),
         "df": M.interaction(env, worlds, links),
     }
+    obj = env.scene["object"]
+    g, b = obj.indexing.geom_ids[0], obj.indexing.body_ids[0]
+    for i, slot in enumerate(cpu.slots):  # the object as the CPU scene built it: size, mass, friction, restitution
+        m0, b0 = slot.scene.model, slot.scene.object_body_id[slot.objects[0].name]
+        g0 = int(np.flatnonzero(m0.geom_bodyid == b0)[0])
+        for field, mine, want in [("geom_size", env.sim.model.geom_size[i, g], m0.geom_size[g0]),
+                                 ("geom_friction", env.sim.model.geom_friction[i, g], m0.geom_friction[g0]),
+                                 ("geom_solref", env.sim.model.geom_solref[i, g], m0.geom_solref[g0]),
+                                 ("geom_solimp", env.sim.model.geom_solimp[i, g], m0.geom_solimp[g0]),
+                                 ("body_mass", env.sim.model.body_mass[i, b], m0.body_mass[b0]),
+                                 ("body_inertia", env.sim.model.body_inertia[i, b], m0.body_inertia[b0])]:  # fmt: skip
+            np.testing.assert_allclose(np.asarray(mine.cpu()), want, rtol=1e-5, err_msg=f"world {i} {field}")
     for key, atol in (("proprio", 1e-5), ("root_command", 1e-5), ("df", 1e-4)):
         np.testing.assert_allclose(got[key].numpy(), getattr(obs, key), atol=atol, err_msg=key)
     env.termination_manager.compute()

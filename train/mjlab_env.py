@@ -25,7 +25,7 @@ numpy code ran at 29k (environment) and 22k (PPO).
 :class:`MjlabPostTrainEnv` is rsl_rl's ``VecEnv`` over it with :class:`train.post_env.PostTrainEnv`'s observations
 and extras, so :mod:`train.aip` trains either. Not on this backend yet (a one-line error, or left out and said so):
 objects other than one free box (chairs, meshes: mjlab fixes a world's geom types at start-up; meshes need
-mjlab's pre-built variants), the box drawn as a cylinder, restitution, and the fall test reads the torso's
+mjlab's pre-built variants), the box drawn as a cylinder, and the fall test reads the torso's
 orientation one physics step stale (mjlab computes terminations before its single ``forward``).
 """
 
@@ -60,7 +60,15 @@ from pipeline.distance.field import boxes_query_links
 from pipeline.errors import InputError
 from pipeline.geometry import Primitive
 from pipeline.robot import NQ_ROBOT, NUM_JOINTS, NV_ROBOT
-from pipeline.scene import IMPRATIO, PHYSICS_TIMESTEP, SceneObject, build_spec, object_spec
+from pipeline.scene import (
+    IMPRATIO,
+    PHYSICS_TIMESTEP,
+    RESTITUTION_SOLIMP,
+    SceneObject,
+    build_spec,
+    object_spec,
+    restitution_solref,
+)
 from pipeline.terms.interaction import interaction_features
 from pipeline.terms.link_motion import link_motion, link_velocity
 from pipeline.terms.observations import command_frames, proprioception, root_command_to
@@ -86,8 +94,9 @@ needed up to 96 rows with elliptic cones in a first 2-world run; past the limit 
 INITIAL_STATE = ("robot_offset", "object_offset", "joint_noise")
 """The draws :func:`train.randomize.perturbed_initial_state` reads."""
 
-MODEL_FIELDS = ("geom_size", "geom_rbound", "geom_aabb", "geom_friction", "body_mass", "body_inertia")
-"""The object's model fields each world holds its own copy of (its episode's size, mass and friction)."""
+MODEL_FIELDS = ("geom_size", "geom_rbound", "geom_aabb", "geom_friction", "geom_solref", "geom_solimp", "body_mass",
+                "body_inertia")  # fmt: skip
+"""The object's model fields each world holds its own copy of (its episode's size, mass, friction, restitution)."""
 
 
 def check_box_episodes(episodes: list[Episode]) -> None:
@@ -170,7 +179,7 @@ class Worlds:
 
     def draw(self, n: int) -> tuple[torch.Tensor, dict]:
         """``n`` starts on the device: episode indices and :func:`train.randomize.draw_batch`'s draws (the box stays
-        a box: no cylinder, no restitution yet)."""
+        a box: its ``cylinder`` draw is ignored)."""
         episode = torch.randint(len(self.episodes), (n,), generator=self.torch_rng, device=self.device)
         return episode, draw_batch(self.randomization, n, self.torch_rng)
 
@@ -206,6 +215,12 @@ class Worlds:
         m.geom_rbound[ids, g] = half.norm(dim=1)
         m.geom_aabb[ids, g] = torch.stack([torch.zeros_like(half), half], 1)  # (centre, half-size)
         m.geom_friction[ids, g, 0] = self.friction0[e] * v["friction_factor"]
+        e_rest = v["restitution"]
+        bouncy = (e_rest > 0)[:, None]
+        solref = restitution_solref(e_rest.clamp(min=1e-6))  # pipeline.scene: a contact spring where e > 0
+        m.geom_solref[ids, g] = torch.where(bouncy, solref, env.sim.get_default_field("geom_solref")[g])
+        solimp = torch.as_tensor(RESTITUTION_SOLIMP, device=self.device)
+        m.geom_solimp[ids, g] = torch.where(bouncy, solimp, env.sim.get_default_field("geom_solimp")[g])
         m.body_mass[ids, b] = mass
         m.body_inertia[ids, b] = mass[:, None] / 3 * (half.square().sum(1, keepdim=True) - half.square())
 
