@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.robot import NV_ROBOT
 from pipeline.rotations import quat_velocity
 
 
@@ -27,10 +26,10 @@ def qpos_difference(q1: np.ndarray, q2: np.ndarray, dt: float) -> np.ndarray:
 
 
 def qvel_from_qpos(qpos: np.ndarray, fps: float) -> np.ndarray:
-    """``(T, 35)`` velocities: the mean of the backward and forward differences (central), one-sided
-    at the first and last frame, zeros for a one-frame clip."""
+    """``(T, nq - 1)`` velocities (35 for the robot, 6 for a free object): the mean of the backward and forward
+    differences (central), one-sided at the first and last frame, zeros for a one-frame clip."""
     qpos = np.asarray(qpos, dtype=np.float64)
     if qpos.shape[0] < 2:
-        return np.zeros((qpos.shape[0], NV_ROBOT))
+        return np.zeros((qpos.shape[0], qpos.shape[1] - 1))
     d = qpos_difference(qpos[:-1], qpos[1:], 1.0 / fps)
     return np.concatenate([d[:1], 0.5 * (d[:-1] + d[1:]), d[-1:]], axis=0)

@@ -129,6 +129,7 @@ def test_qvel_constant_body_rate():
     np.testing.assert_allclose(v[:, 0], 0.5, atol=1e-12)
     np.testing.assert_allclose(v[1:-1, 10 - 1], np.cos(np.arange(1, T - 1) / fps), atol=1e-4)
     assert qvel_from_qpos(q[:1], fps).shape == (1, 35) and not qvel_from_qpos(q[:1], fps).any()
+    assert qvel_from_qpos(q[:1, :7], fps).shape == (1, 6)  # a free object's one-frame track: its own width
 
 
 def test_source_frame_of_a_resampled_clip():
