@@ -100,7 +100,7 @@ def _cmd_train_aip(a: argparse.Namespace) -> int:
     if not policy.is_file():
         make = "make train-bc" + (f" ABLATION={a.ablation}" if a.ablation in PRE_TRAINING else "")
         raise InputError(policy, "policy.pt", f"no BC + DAgger policy here: run `{make}` first")
-    out = ab.post_dir
+    out = ab.post_dir.with_name(ab.post_dir.name + "-mjlab") if mjlab else ab.post_dir  # a GPU run beside the CPU's
     device = a.device or ("cuda" if mjlab else "cpu")
     if mjlab:
         from train.mjlab_env import check_device

@@ -124,19 +124,23 @@ def test_a_chair_is_a_one_line_error(bc_corpus):
         check_box_episodes(chair)
 
 
-def test_one_post_training_iteration_on_the_mjlab_backend(bc_corpus, tmp_path):
-    """`train-aip --backend mjlab` at smoke scale on the CPU: PPO, AIP and AMP over the mjlab worlds, a checkpoint
-    and a report that names the backend; SitStand's chair is left to the CPU backend, and said."""
+def test_one_post_training_iteration_on_the_mjlab_backend(bc_corpus):
+    """`train-aip --backend mjlab` at smoke scale on the CPU: PPO, AIP and AMP over the mjlab worlds into
+    runs/<RUN>/aip-mjlab/, a checkpoint and a report that names the backend; SitStand's chair is left to the CPU
+    backend, and said."""
     import json
 
-    from train.aip import PostTrainConfig, post_train
+    from lessmimic.cli import main
 
-    cfg = PostTrainConfig(iterations=1, steps_per_env=4, env=PostEnvConfig(envs=2), disc_minibatches=2,
-                          critic_warmup=0, backend="mjlab")  # fmt: skip
-    row = post_train("train", bc_corpus[1], tmp_path, cfg, device="cpu")
+    run = bc_corpus[1].parent
+    args = ["--iterations", "1", "--steps-per-env", "4", "--envs", "2", "--device", "cpu"]
+    assert main(["train-aip", "--name", "train", "--run", str(run), "--backend", "mjlab", *args]) == 0
+    out = run / "aip-mjlab"
+    row = json.loads((out / "post_log.jsonl").read_text().splitlines()[-1])
     assert row["env_steps"] == 8 and np.isfinite(row["task_reward"]) and "aip_reward" in row
-    assert (tmp_path / "policy.pt").is_file()
-    assert json.loads((tmp_path / "report.json").read_text())["scale"]["post_training"]["backend"] == "mjlab"
+    assert (out / "policy.pt").is_file() and not (run / "aip").exists()
+    post = json.loads((out / "report.json").read_text())["scale"]["post_training"]
+    assert post["backend"] == "mjlab" and post["envs"] == 2
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has a GPU")
