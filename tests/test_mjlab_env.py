@@ -34,7 +34,7 @@ def mjlab_env(box_episodes):
 
 
 def test_the_same_state_gives_the_same_observation_and_reward(box_episodes, mjlab_env):
-    from train import mjlab_env as M
+    from train import mjlab_terms as M
 
     rng = np.random.default_rng(5)
     assignments = [(i, replace(draw(NO_NOISE, rng), cylinder=False)) for i in (0, 1)]
@@ -117,7 +117,7 @@ def test_a_step_restarts_and_hands_rsl_rl_what_the_cpu_environment_does(mjlab_en
 
 
 def test_a_chair_is_a_one_line_error(bc_corpus):
-    from train.mjlab_env import check_box_episodes
+    from train.mjlab_terms import check_box_episodes
 
     chair = [e for e in bc_corpus[0] if e.task == "SitStand"]
     with pytest.raises(InputError, match="objects.*one free box, not Chair"):

@@ -9,8 +9,9 @@ priors. Read top to bottom:
    samples against its reference buffer, at the paper's 2e-4;
 2. :func:`reference_buffers`: ``B_ref`` of the AIP is the VAE latents of every frame of the valid episodes of the
    features dataset (the pre-training data); the AMP's is their consecutive-frame transitions;
-3. :func:`post_train` builds the restarting environment (:class:`train.post_env.PostTrainEnv`, with the six
-   randomisations of :mod:`train.randomize`), the actor (:class:`train.rl_model.InteractionActor`, initialised
+3. :func:`post_train` builds the restarting environment (:class:`train.post_env.PostTrainEnv` on the CPU, or
+   :class:`train.mjlab_env.MjlabPostTrainEnv` on a GPU with ``backend="mjlab"``; the six randomisations of
+   :mod:`train.randomize`), the actor (:class:`train.rl_model.InteractionActor`, initialised
    from ``policy.pt``), an MLP critic (rsl_rl's, normalised inputs), and runs ``iterations`` of:
    ``steps_per_env`` steps of rollout, returns (GAE), PPO update, discriminator update; a row of
    ``post_log.jsonl`` per iteration, and ``policy.pt`` (an interaction-policy checkpoint that ``lessmimic eval``
