@@ -96,6 +96,7 @@ def main() -> None:
     ap.add_argument("--policy", required=True, help="a BC + DAgger policy.pt (runs/<RUN>/policy.pt)")
     ap.add_argument("--envs", default="1024,4096")
     ap.add_argument("--ppo-envs", type=int, default=4096)
+    ap.add_argument("--ppo-iterations", type=int, default=5)
     ap.add_argument("--device", default="cuda")
     ap.add_argument("--profile", action="store_true", help="also profile 20 environment steps at the last size")
     args = ap.parse_args()
@@ -103,8 +104,9 @@ def main() -> None:
     sizes = [int(v) for v in args.envs.split(",")]
     for n in sizes:
         environment_rows(args.name, args.policy, n, args.device, profile=args.profile and n == sizes[-1])
-    print(f"post-training, {args.ppo_envs} worlds x 24 steps per PPO iteration, 5 iterations after one warm-up:")
-    post_training_rows(args.name, args.policy, args.ppo_envs, args.device)
+    print(f"post-training, {args.ppo_envs} worlds x 24 steps per PPO iteration, {args.ppo_iterations} iterations "
+          "after one warm-up:")  # fmt: skip
+    post_training_rows(args.name, args.policy, args.ppo_envs, args.device, args.ppo_iterations)
 
 
 if __name__ == "__main__":

@@ -73,7 +73,12 @@ def test_the_same_state_gives_the_same_observation_and_reward(box_episodes, mjla
                                  ("geom_solref", env.sim.model.geom_solref[i, g], m0.geom_solref[g0]),
                                  ("geom_solimp", env.sim.model.geom_solimp[i, g], m0.geom_solimp[g0]),
                                  ("body_mass", env.sim.model.body_mass[i, b], m0.body_mass[b0]),
-                                 ("body_inertia", env.sim.model.body_inertia[i, b], m0.body_inertia[b0])]:  # fmt: skip
+                                 ("body_inertia", env.sim.model.body_inertia[i, b], m0.body_inertia[b0]),
+                                 ("body_subtreemass", env.sim.model.body_subtreemass[i, [0, b]],
+                                  m0.body_subtreemass[[0, b0]]),
+                                 ("body_invweight0", env.sim.model.body_invweight0[i, b], m0.body_invweight0[b0]),
+                                 ("dof_invweight0", env.sim.model.dof_invweight0[i, obj.indexing.free_joint_v_adr],
+                                  m0.dof_invweight0[m0.body_dofadr[b0] : m0.body_dofadr[b0] + 6])]:  # fmt: skip
             np.testing.assert_allclose(np.asarray(mine.cpu()), want, rtol=1e-5, err_msg=f"world {i} {field}")
     for key, atol in (("proprio", 1e-5), ("root_command", 1e-5), ("df", 1e-4)):
         np.testing.assert_allclose(got[key].numpy(), getattr(obs, key), atol=atol, err_msg=key)

@@ -1,8 +1,7 @@
-"""The mjlab backend's terms (:mod:`train.mjlab_env` assembles them into the environment): :class:`Worlds`, the episodes' reference
-tracks on the device and what each world runs; the restart event :func:`start_episodes`; the noisy joint-target
-action; and the observation, reward and termination terms, plain functions ``(env, **params) -> (N, ...)`` that call
-the CPU environment's own functions on torch tensors read from MuJoCo Warp's data (the module docstring of
-:mod:`train.mjlab_env` lists them)."""
+"""The mjlab backend's terms, which :mod:`train.mjlab_env` assembles into the environment: :class:`Worlds`, the
+episodes' reference tracks on the device and what each world runs; the restart event :func:`start_episodes`; the noisy
+joint-target action; and the observation, reward and termination terms, plain functions ``(env, **params) ->
+(N, ...)`` that call the CPU environment's own functions on torch tensors read from MuJoCo Warp's data."""
 
 from __future__ import annotations
 
@@ -12,7 +11,7 @@ import numpy as np
 import torch
 from mjlab.envs import ManagerBasedRlEnv
 from mjlab.envs.mdp.actions import JointPositionAction, JointPositionActionCfg
-from mjlab.managers.event_manager import RecomputeLevel, requires_model_fields
+from mjlab.managers.event_manager import requires_model_fields
 
 from features.compute import FeatureConfig
 from physicalize.rollout import FALL_HEIGHT_DROP, FALL_TILT_COS
@@ -43,8 +42,11 @@ INITIAL_STATE = ("robot_offset", "object_offset", "joint_noise")
 """The draws :func:`train.randomize.perturbed_initial_state` reads."""
 
 MODEL_FIELDS = ("geom_size", "geom_rbound", "geom_aabb", "geom_friction", "geom_solref", "geom_solimp", "body_mass",
-                "body_inertia")  # fmt: skip
-"""The object's model fields each world holds its own copy of (its episode's size, mass, friction, restitution)."""
+                "body_inertia", "body_subtreemass", "body_invweight0", "dof_invweight0")  # fmt: skip
+"""The object's model fields each world holds its own copy of: its episode's size, mass, inertia, friction and
+restitution, and the constants MuJoCo derives from the mass (``mj_setConst``), written directly (:meth:`Worlds.start`):
+MuJoCo Warp's ``set_const`` recomputes them for every world in ~1400 kernel launches (41 dofs, 31 bodies x 6 rows;
+counted on the CPU), at every restart."""
 
 
 def check_box_episodes(episodes: list[Episode]) -> None:
@@ -150,8 +152,15 @@ class Worlds:
         m.geom_solref[ids, g] = torch.where(bouncy, solref, env.sim.get_default_field("geom_solref")[g])
         solimp = torch.as_tensor(RESTITUTION_SOLIMP, device=self.device)
         m.geom_solimp[ids, g] = torch.where(bouncy, solimp, env.sim.get_default_field("geom_solimp")[g])
-        m.body_mass[ids, b] = mass
-        m.body_inertia[ids, b] = mass[:, None] / 3 * (half.square().sum(1, keepdim=True) - half.square())
+        inertia = mass[:, None] / 3 * (half.square().sum(1, keepdim=True) - half.square())  # a box about its centre
+        world_mass = env.sim.get_default_field("body_subtreemass")[0] - env.sim.get_default_field("body_mass")[b]
+        m.body_mass[ids, b], m.body_inertia[ids, b] = mass, inertia
+        # what mj_setConst derives for a free box (its own tree, centre of mass at its origin): the subtree masses,
+        # and the mean diagonal of J M^-1 J' over translation (1/m) and rotation (mean 1/I) rows, per body and dof
+        m.body_subtreemass[ids, b], m.body_subtreemass[ids, 0] = mass, world_mass + mass
+        invweight = torch.stack([1 / mass, (1 / inertia).mean(1)], 1)
+        m.body_invweight0[ids, b] = invweight
+        m.dof_invweight0[ids[:, None], obj.indexing.free_joint_v_adr] = invweight.repeat_interleave(3, 1)
 
 
 def _torso_up(sim) -> np.ndarray:
@@ -159,7 +168,7 @@ def _torso_up(sim) -> np.ndarray:
     return link_motion(sim.robot.qpos, sim.qvel, ("torso_link",)).rot[:, 0, :, 2]
 
 
-@requires_model_fields(*MODEL_FIELDS, recompute=RecomputeLevel.set_const)
+@requires_model_fields(*MODEL_FIELDS)
 def start_episodes(env: ManagerBasedRlEnv, env_ids: torch.Tensor | None, worlds: Worlds) -> None:
     """Reset event: each world in ``env_ids`` starts a drawn episode (:meth:`Worlds.draw`)."""
     ids = torch.arange(env.num_envs, device=env.device) if env_ids is None else env_ids
