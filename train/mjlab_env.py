@@ -16,11 +16,21 @@
   the perception noise apply every step.
 
 Measured on one H200 (``make bench-train-mjlab``, 4096 worlds, the default corpus's box episodes, the laptop run's
-policy): MuJoCo Warp alone 173k env steps/s, this environment 48k, PPO 28k env steps/s plain, 27k with the
-randomisations (+7%), 25k with the AIP and AMP priors too (+14%). A profile of 20 steps: ~680 warp launches per step
-outside CUDA graphs (the restarts' ``set_const``, needed because the object's mass changes, is the likely bulk) and
-the device syncs of reading the warp arrays. A first version that started each restart in a Python loop of the
-numpy code ran at 29k (environment) and 22k (PPO).
+policy), three versions: restarts as a Python loop of the numpy code, then drawn and started on the device for all
+worlds at once, then without MuJoCo Warp's ``set_const`` (the object's derived constants written directly,
+:data:`train.mjlab_terms.MODEL_FIELDS`):
+
+==========================================  ==========  ==========  =============
+env steps/s                                  loop        batched     no set_const
+==========================================  ==========  ==========  =============
+MuJoCo Warp alone (4 substeps)               173k        173k        152k
+this environment                             29k         48k         56k
+PPO, plain (no randomisation, no prior)      22k         28k         39k
+PPO + randomisations                         20k (+10%)  27k (+7%)   36k (+8%)
+PPO + randomisations + AIP + AMP             21k (+7%)   25k (+14%)  36k (+10%)
+==========================================  ==========  ==========  =============
+
+(5 PPO iterations per case in the first two columns, 3 in the last; the physics row moved by 12% between machines.)
 
 :class:`MjlabPostTrainEnv` is rsl_rl's ``VecEnv`` over it with :class:`train.post_env.PostTrainEnv`'s observations
 and extras, so :mod:`train.aip` trains either. Not on this backend yet (a one-line error, or left out and said so):
