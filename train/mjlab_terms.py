@@ -67,7 +67,7 @@ class Worlds:
     """The episodes' reference tracks on the device (padded with their last frame to the longest) and what each
     world runs: its episode, the object's size and height shift at the drawn scale, the command offset.
 
-    ``start(env, ids, assignments)`` writes episodes into worlds; :func:`start_episodes` draws them."""
+    :meth:`start` writes episodes into worlds; :func:`start_episodes` draws them (:meth:`draw`)."""
 
     def __init__(self, episodes: list[Episode], envs: int, randomization: RandomizationConfig, seed: int,
                  device: str, horizon_s: float = FeatureConfig().root_horizon_s):  # fmt: skip
@@ -156,7 +156,8 @@ class Worlds:
         world_mass = env.sim.get_default_field("body_subtreemass")[0] - env.sim.get_default_field("body_mass")[b]
         m.body_mass[ids, b], m.body_inertia[ids, b] = mass, inertia
         # what mj_setConst derives for a free box (its own tree, centre of mass at its origin): the subtree masses,
-        # and the mean diagonal of J M^-1 J' over translation (1/m) and rotation (mean 1/I) rows, per body and dof
+        # and the mean diagonal of J M^-1 J' over translation (1/m) and rotation (mean 1/I) rows, per body and dof;
+        # left at the compiled model's: stat.meaninertia (the solver's scale, the mean of M's diagonal over 41 dofs)
         m.body_subtreemass[ids, b], m.body_subtreemass[ids, 0] = mass, world_mass + mass
         invweight = torch.stack([1 / mass, (1 / inertia).mean(1)], 1)
         m.body_invweight0[ids, b] = invweight
