@@ -7,7 +7,7 @@ import pytest
 from fused_poses import check_pose_per_frame
 
 from pipeline.distance.field import ObjectField
-from pipeline.distance.primitive import _box_phi, chair_shape, primitive_shape
+from pipeline.distance.primitive import box_phi, chair_shape, primitive_shape
 from pipeline.geometry import Chair, Primitive
 
 BOXES = [
@@ -93,12 +93,12 @@ def test_chair_kernel_matches_numpy_with_the_first_part_on_ties():
     shape = chair_shape(chair)
     p = _chair_points(chair)
     _compare(shape, p)
-    phis = np.stack([_box_phi(*(p - o).T, *box.half, np) for box, o in shape.parts])
+    phis = np.stack([box_phi(*(p - o).T, *box.half, np) for box, o in shape.parts])
     tie = (phis == phis.min(0)).sum(0) > 1
     assert tie.sum() > 500  # exactly equidistant parts are really exercised
     _, _, c = shape.world(p[tie], *IDENTITY)
     first = np.argmax(phis[:, tie] == phis[:, tie].min(0), axis=0)
-    own = np.stack([_box_phi(*(c - shape.parts[k][1]).T, *shape.parts[k][0].half, np) for k in range(len(shape.parts))])
+    own = np.stack([box_phi(*(c - shape.parts[k][1]).T, *shape.parts[k][0].half, np) for k in range(len(shape.parts))])
     np.testing.assert_allclose(
         own[first, np.arange(len(first))], 0.0, atol=1e-12
     )  # the closest point lies on the first part

@@ -30,7 +30,7 @@ from physicalize.contacts import robot_contacts
 from physicalize.hand_reach import hand_geoms
 from physicalize.rollout import SUBSTEPS, fallen
 from pipeline.distance.field import ObjectField, ObjectFields, boxes_query_links
-from pipeline.geometry import MeshGeometry, Primitive
+from pipeline.geometry import Chair, MeshGeometry, Primitive
 from pipeline.robot import FOOT_BODIES, NQ_ROBOT, NUM_JOINTS, NV_ROBOT
 from pipeline.scene import Scene, SceneObject, build_scene, link_collision_geoms
 from pipeline.terms.interaction import interaction_features
@@ -84,8 +84,7 @@ class _Slot:
         if key not in fields:  # one ObjectFields per object set: environments with the same objects share it
             fields[key] = ObjectFields(tuple(_field(fields, o) for o in self.objects))
         self.fields = fields[key]
-        g = self.objects[0].geometry if len(self.objects) == 1 else None
-        self.box_half = g.half_extents if isinstance(g, Primitive) and g.kind == "box" else None
+        self.box_parts = _box_parts(self.objects)
         self.field_keys = {key, *key}  # the cache entries this environment uses (InteractionEnv.reset_one prunes)
         self.command = command_frames(sim.frames, sim.robot.fps, cfg.root_horizon_s)
         torso = link_motion(sim.robot.qpos, sim.qvel, ("torso_link",)).rot[:, 0]
@@ -182,6 +181,17 @@ def _field(cache: dict, o) -> ObjectField:
     return cache[key]
 
 
+def _box_parts(objects) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(half-extents (P, 3), centres (P, 3))`` of one object made of boxes (a box: P = 1; a chair: its parts), for
+    the batched field query; None for anything else."""
+    g = objects[0].geometry if len(objects) == 1 else None
+    if isinstance(g, Primitive) and g.kind == "box":
+        return np.asarray(g.half_extents, dtype=float)[None], np.zeros((1, 3))
+    if isinstance(g, Chair):
+        return np.array([p.half_extents for _, p, _ in g.parts()]), np.array([c for _, _, c in g.parts()])
+    return None
+
+
 def _mat_quat(R: np.ndarray) -> np.ndarray:
     q = np.empty(4)
     mujoco.mju_mat2Quat(q, R.ravel())
@@ -238,8 +248,8 @@ class InteractionEnv:
 
     def observe(self) -> Obs:
         """The current observation of every environment (module docstring). The field queries go in batches (a
-        query's fixed cost, ~0.1 ms, would otherwise repeat per env): every environment whose object is one box, of
-        whatever size, in one; the others one per object set."""
+        query's fixed cost, ~0.1 ms, would otherwise repeat per env): the environments whose object is made of boxes
+        (a box, a chair), of whatever drawn size, in one per number of parts; the others one per object set."""
         n = len(self.slots)
         qpos = np.stack([s.data.qpos[:NQ_ROBOT] for s in self.slots])
         qvel = np.stack([s.data.qvel[:NV_ROBOT] for s in self.slots])
@@ -254,14 +264,17 @@ class InteractionEnv:
             if s.variation is not None:
                 target_q[i] = R.perturb_command(target_q[i], s.variation)
             pos[i], _, vel[i] = link_state(s.scene.model, s.data, s.ids)
-            if s.box_half is None:
+            if s.box_parts is None:
                 groups.setdefault(id(s.fields), []).append(i)
         phi, grad = np.zeros(pos.shape[:2]), np.zeros(pos.shape)
-        boxes = [i for i, s in enumerate(self.slots) if s.box_half is not None]
-        if boxes:  # one batch whatever their sizes (pipeline.distance.field.boxes_query_links)
-            poses = np.stack([_object_pose(self.slots[i], self.slots[i].objects[0]) for i in boxes])
-            half = np.stack([self.slots[i].box_half for i in boxes])
-            phi[boxes], grad[boxes] = boxes_query_links(pos[boxes], poses, half)
+        by_parts: dict[int, list[int]] = {}  # boxes and chairs, by their number of parts
+        for i, s in enumerate(self.slots):
+            if s.box_parts is not None:
+                by_parts.setdefault(len(s.box_parts[0]), []).append(i)
+        for rows in by_parts.values():  # one batch whatever their sizes (pipeline.distance.field.boxes_query_links)
+            poses = np.stack([_object_pose(self.slots[i], self.slots[i].objects[0]) for i in rows])
+            half, centre = (np.stack([self.slots[i].box_parts[k] for i in rows]) for k in (0, 1))
+            phi[rows], grad[rows] = boxes_query_links(pos[rows], poses, half, centre)
         for rows in groups.values():
             slot = self.slots[rows[0]]
             poses = np.stack([np.stack([_object_pose(self.slots[i], o) for o in slot.objects]) for i in rows])

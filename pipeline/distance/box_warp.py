@@ -56,7 +56,7 @@ def _box(h: wp.vec3d, p: wp.vec3d) -> vec7d:
 
 @wp.func
 def _box_phi(h: wp.vec3d, p: wp.vec3d) -> wp.float64:
-    """phi only (as ``distance_primitive._box_phi``): |max(q, 0)| outside, -max q inside, q = |p| - h."""
+    """phi only (as ``distance_primitive.box_phi``): |max(q, 0)| outside, -max q inside, q = |p| - h."""
     qx = wp.abs(p[0]) - h[0]
     qy = wp.abs(p[1]) - h[1]
     qz = wp.abs(p[2]) - h[2]

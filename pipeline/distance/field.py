@@ -24,7 +24,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from pipeline.distance.array_ns import as_float, namespace, to_numpy
+from pipeline.distance.array_ns import as_float, concat, namespace, to_numpy
 from pipeline.distance.primitive import chair_shape, primitive_shape
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.geometry import Chair, MeshGeometry, ObjectGeometry, Primitive, geometry_from_dict
@@ -216,19 +216,36 @@ class ObjectFields:
         return NearestSample(phi, grad, closest, index)
 
 
-def boxes_query_links(points, poses, half) -> tuple[Any, Any]:
+def boxes_query_links(points, poses, half, centre=None) -> tuple[Any, Any]:
     """``(phi (N, K), grad (N, K, 3))`` of N boxes of their own half-extents ``half`` (N, 3), each at its pose
     ``poses`` (N, 7), for their K points ``points`` (N, K, 3): one batch where each box size would otherwise be its
-    own :class:`ObjectField` (a post-training episode draws its own scale). The pose transform is
-    :meth:`ObjectField._chunk`'s, the field :func:`pipeline.distance.primitive.box_local`; numpy or torch alike
-    (the CPU environment and the mjlab backend share it)."""
-    from pipeline.distance.primitive import box_local
+    own :class:`ObjectField` (a post-training episode draws its own scale). With ``half`` (N, P, 3) and the parts'
+    ``centre`` (N, P, 3) in the object frame, N unions of P boxes (chairs), each point taking its nearest part (the
+    first on ties), as :class:`pipeline.distance.primitive.ChairShape`. The pose transform is
+    :meth:`ObjectField._chunk`'s, the field :func:`pipeline.distance.primitive.box_local`; numpy or torch alike (the
+    CPU environment and the mjlab backend share it)."""
+    from pipeline.distance.primitive import box_local, box_phi
 
     xp = namespace(points)
     t = [poses[:, None, i] for i in range(3)]
     R = rotation_rows(poses[:, None, 3:7], xp)
     X, Y, Z = points[..., 0] - t[0], points[..., 1] - t[1], points[..., 2] - t[2]
     local = [R[0][j] * X + R[1][j] * Y + R[2][j] * Z for j in range(3)]
-    phi, g, _ = box_local(*local, half[:, None, 0], half[:, None, 1], half[:, None, 2], xp)
+    if half.ndim == 2:
+        phi, g, _ = box_local(*local, half[:, None, 0], half[:, None, 1], half[:, None, 2], xp)
+    else:
+        table = concat([half, centre], xp, axis=2)  # (N, P, 6): half-extents, then centre
+        best = part = None
+        for k in range(half.shape[1]):
+            h, c = table[:, None, k, :3], table[:, None, k, 3:]
+            phi_k = box_phi(*(local[i] - c[..., i] for i in range(3)), *(h[..., i] for i in range(3)), xp)
+            if best is None:
+                best, part = phi_k, 0 * (phi_k > 0)
+                continue
+            near = phi_k < best
+            best, part = xp.where(near, phi_k, best), xp.where(near, k, part)
+        rows = xp.arange(len(table))[:, None] if xp is np else xp.arange(len(table), device=table.device)[:, None]
+        h, c = table[rows, part, :3], table[rows, part, 3:]
+        phi, g, _ = box_local(*(local[i] - c[..., i] for i in range(3)), *(h[..., i] for i in range(3)), xp)
     grad = xp.stack([R[i][0] * g[0] + R[i][1] * g[1] + R[i][2] * g[2] for i in range(3)], -1)
     return phi, grad

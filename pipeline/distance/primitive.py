@@ -97,7 +97,7 @@ def box_local(x, y, z, hx, hy, hz, xp):
     return xp.where(solid, depth, out), g, c
 
 
-def _box_phi(x, y, z, hx, hy, hz, xp):
+def box_phi(x, y, z, hx, hy, hz, xp):
     """phi only: |outside distance| or inside depth."""
     qx, qy, qz = abs(x) - hx, abs(y) - hy, abs(z) - hz
     ox, oy, oz = xp.clip(qx, 0.0, None), xp.clip(qy, 0.0, None), xp.clip(qz, 0.0, None)
@@ -302,7 +302,7 @@ class ChairShape:
     def local(self, x, y, z, xp):
         best = part = None
         for k, (box, (ox, oy, oz)) in enumerate(self.parts):
-            phi = _box_phi(x - ox, y - oy, z - oz, *box.half, xp)
+            phi = box_phi(x - ox, y - oy, z - oz, *box.half, xp)
             if best is None:
                 best, part = phi, 0 * (phi > 0)
                 continue
