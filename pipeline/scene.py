@@ -88,16 +88,26 @@ def restitution_damping_ratio(e: float) -> float:
     """Contact damping ratio ``zeta`` giving a coefficient of restitution ``e`` in [0, 1)."""
     if not 0.0 <= e < 1.0:
         raise ValueError(f"restitution must be in [0, 1), got {e}")
-    return float(restitution_solref(np.float64(e))[1]) / (-2.0 * RESTITUTION_CONTACT_FREQ) if e > 0 else 1.0
+    return float(_damping_ratio(np.float64(e))) if e > 0 else 1.0
+
+
+def _damping_ratio(e):
+    """``zeta = -ln e / sqrt(pi^2 + ln^2 e)`` for ``e`` in (0, 1), the damped-oscillator relation; numpy or torch."""
+    xp = namespace(e)
+    le = xp.log(e)
+    return -le / xp.sqrt(math.pi**2 + le**2)
+
+
+def contact_spring(zeta):
+    """(..., 2) MuJoCo's direct ``solref = (-w^2, -2 zeta w)`` of the contact spring of damping ratio ``zeta``."""
+    w = RESTITUTION_CONTACT_FREQ
+    return namespace(zeta).stack([0.0 * zeta - w * w, -2.0 * zeta * w], -1)
 
 
 def restitution_solref(e):
-    """(..., 2) MuJoCo's direct ``solref = (-w^2, -2 zeta w)`` of a contact spring with restitution ``e`` (...) in
-    (0, 1), ``zeta = -ln e / sqrt(pi^2 + ln^2 e)``; numpy or torch alike (the mjlab backend draws ``e`` per world)."""
-    xp, w = namespace(e), RESTITUTION_CONTACT_FREQ
-    le = xp.log(e)
-    zeta = -le / xp.sqrt(math.pi**2 + le**2)
-    return xp.stack([0.0 * zeta - w * w, -2.0 * zeta * w], -1)
+    """(..., 2) :func:`contact_spring` for restitution ``e`` (...) in (0, 1); numpy or torch alike (the mjlab backend
+    draws ``e`` per world)."""
+    return contact_spring(_damping_ratio(e))
 
 
 def _apply_robot_collisions(spec: mujoco.MjSpec) -> None:
@@ -184,13 +194,13 @@ def _add_object(spec: mujoco.MjSpec, obj: SceneObject) -> None:
     else:
         raise TypeError(f"object {obj.name}: unsupported geometry {type(geo).__name__}")
     total = sum(v for _, v in collide)
-    restitution_damping_ratio(phys.restitution)  # its range checked
+    zeta = restitution_damping_ratio(phys.restitution)
     for g, vol in collide:
         g.contype = g.conaffinity = 1
         g.condim, g.priority = 3, OBJECT_PRIORITY
         g.friction = [phys.friction, 0.005, 0.0001]
         if phys.restitution > 0:
-            g.solref, g.solimp = restitution_solref(np.float64(phys.restitution)).tolist(), list(RESTITUTION_SOLIMP)
+            g.solref, g.solimp = contact_spring(np.float64(zeta)).tolist(), list(RESTITUTION_SOLIMP)
         g.mass = phys.mass * vol / total
         g.rgba = [0.8, 0.5, 0.2, 1.0]
 

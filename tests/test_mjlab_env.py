@@ -63,6 +63,9 @@ def test_the_same_state_gives_the_same_observation_and_reward(box_episodes, mjla
         "root_command": M.root_command(env, worlds),
         "df": M.interaction(env, worlds, links),
     }
+    native, warp = cpu.slots[0].scene.model.opt, env.sim.mj_model.opt  # the solver options mjlab_env._options copies
+    for name in ("timestep", "integrator", "cone", "impratio"):
+        assert getattr(warp, name) == getattr(native, name), name
     obj = env.scene["object"]
     g, b = obj.indexing.geom_ids[0], obj.indexing.body_ids[0]
     for i, slot in enumerate(cpu.slots):  # the object as the CPU scene built it: size, mass, friction, restitution

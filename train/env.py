@@ -256,7 +256,8 @@ class InteractionEnv:
         last = np.stack([s.last_action for s in self.slots])
         target_q, target_v = np.zeros((n, 7)), np.zeros((n, 3))
         pos, vel = np.zeros((n, len(self.cfg.links), 3)), np.zeros((n, len(self.cfg.links), 3))
-        groups: dict[int, list[int]] = {}
+        groups: dict[int, list[int]] = {}  # the others, by their object set
+        by_parts: dict[int, list[int]] = {}  # boxes and chairs, by their number of parts
         for i, s in enumerate(self.slots):
             sim = s.episode.simulated
             j = s.command[min(s.t, sim.frames - 1)]
@@ -266,11 +267,9 @@ class InteractionEnv:
             pos[i], _, vel[i] = link_state(s.scene.model, s.data, s.ids)
             if s.box_parts is None:
                 groups.setdefault(id(s.fields), []).append(i)
-        phi, grad = np.zeros(pos.shape[:2]), np.zeros(pos.shape)
-        by_parts: dict[int, list[int]] = {}  # boxes and chairs, by their number of parts
-        for i, s in enumerate(self.slots):
-            if s.box_parts is not None:
+            else:
                 by_parts.setdefault(len(s.box_parts[0]), []).append(i)
+        phi, grad = np.zeros(pos.shape[:2]), np.zeros(pos.shape)
         for rows in by_parts.values():  # one batch whatever their sizes (pipeline.distance.field.boxes_query_links)
             poses = np.stack([_object_pose(self.slots[i], self.slots[i].objects[0]) for i in rows])
             half, centre = (np.stack([self.slots[i].box_parts[k] for i in rows]) for k in (0, 1))

@@ -30,6 +30,7 @@ from pipeline.terms.observations import command_frames, proprioception, root_com
 from train import rewards as R
 from train.episodes import Episode
 from train.randomize import (
+    INITIAL_STATE,
     RandomizationConfig,
     actuation_noise,
     draw_batch,
@@ -37,9 +38,6 @@ from train.randomize import (
     perturbed_initial_state,
     turn,
 )
-
-INITIAL_STATE = ("robot_offset", "object_offset", "joint_noise")
-"""The draws :func:`train.randomize.perturbed_initial_state` reads."""
 
 MODEL_FIELDS = ("geom_size", "geom_rbound", "geom_aabb", "geom_friction", "geom_solref", "geom_solimp", "body_mass",
                 "body_inertia", "body_subtreemass", "body_invweight0", "dof_invweight0")  # fmt: skip

@@ -157,8 +157,11 @@ def _turn(qpos7: np.ndarray, offset: tuple[float, float, float]) -> None:
 def perturb_initial_state(qpos: np.ndarray, joint_range: np.ndarray, object_adr: list[int], v: Variation) -> None:
     """In place on one scene's ``qpos``: :func:`perturbed_initial_state` of ``v``."""
     b = stack([v])
-    keys = ("robot_offset", "object_offset", "joint_noise")
-    qpos[:] = perturbed_initial_state(qpos[None], joint_range, object_adr, *(b[k] for k in keys))[0]
+    qpos[:] = perturbed_initial_state(qpos[None], joint_range, object_adr, *(b[k] for k in INITIAL_STATE))[0]
+
+
+INITIAL_STATE = ("robot_offset", "object_offset", "joint_noise")
+"""The draws :func:`perturbed_initial_state` reads, in its argument order."""
 
 
 def perturbed_initial_state(qpos, joint_range, object_adr: list[int], robot_offset, object_offset, joint_noise):
