@@ -16,11 +16,13 @@ Geometry is pure data; :mod:`pipeline.scene` turns it into MuJoCo geoms.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
+
+from pipeline.distance.array_ns import namespace
 
 PrimitiveKind = Literal["box", "cylinder", "sphere", "capsule"]
 _SIZE_LEN = {"box": 3, "sphere": 1, "cylinder": 2, "capsule": 2}
@@ -104,40 +106,45 @@ class Chair:
             raise ValueError(f"chair seat_height {self.seat_height} must exceed seat_thickness {self.seat_thickness}")
 
     def scaled(self, factor) -> Chair:
-        """The chair scaled per axis in its frame (x depth, y width, z heights); legs scale with the smaller of x, y."""
-        sx, sy, sz = np.broadcast_to(np.asarray(factor, dtype=float), (3,))
-        return Chair(
-            seat_height=self.seat_height * sz,
-            seat_width=self.seat_width * sy,
-            seat_depth=self.seat_depth * sx,
-            seat_thickness=self.seat_thickness * sz,
-            back_height=self.back_height * sz,
-            back_thickness=self.back_thickness * sx,
-            leg_width=self.leg_width * min(sx, sy),
-        )
+        """The chair scaled per axis in its frame (:func:`chair_scaled`)."""
+        scale = np.broadcast_to(np.asarray(factor, dtype=float), (3,))[None]
+        return Chair(*(float(v) for v in chair_scaled(np.array([astuple(self)]), scale)[0]))
 
     def parts(self) -> list[tuple[str, Primitive, np.ndarray]]:
-        """(name, box, centre in the chair frame) for each part."""
-        hw, hd, t = self.seat_width / 2, self.seat_depth / 2, self.seat_thickness
-        leg_h = self.seat_height - t
-        lw = self.leg_width / 2
-        parts = [
-            ("seat", Primitive("box", (hd, hw, t / 2)), np.array([0.0, 0.0, self.seat_height - t / 2])),
-            (
-                "back",
-                Primitive("box", (self.back_thickness / 2, hw, self.back_height / 2)),
-                np.array([-hd + self.back_thickness / 2, 0.0, self.seat_height + self.back_height / 2]),
-            ),
-        ]
-        for i, (sx, sy) in enumerate([(1, 1), (1, -1), (-1, 1), (-1, -1)]):
-            parts.append(
-                (
-                    f"leg{i}",
-                    Primitive("box", (lw, lw, leg_h / 2)),
-                    np.array([sx * (hd - lw), sy * (hw - lw), leg_h / 2]),
-                )
-            )
-        return parts
+        """(name, box, centre in the chair frame) for each part (:func:`chair_boxes`)."""
+        half, centre = chair_boxes(np.array([astuple(self)]))
+        return [(name, Primitive("box", tuple(half[0, k])), centre[0, k]) for k, name in enumerate(CHAIR_PARTS)]
+
+
+CHAIR_PARTS = ("seat", "back", "leg0", "leg1", "leg2", "leg3")
+
+
+def chair_scaled(params, scale):
+    """(N, 7) chairs (:class:`Chair`'s fields in order) scaled per axis ``scale`` (N, 3) in their frame: x the
+    depths, y the width, z the heights; the legs' width with the smaller of x and y. numpy or torch alike (a restart
+    of the mjlab backend scales a batch of chairs)."""
+    xp = namespace(params)
+    sx, sy, sz = scale[:, 0], scale[:, 1], scale[:, 2]
+    return params * xp.stack([sz, sy, sx, sz, sz, sx, xp.minimum(sx, sy)], 1)
+
+
+def chair_boxes(params):
+    """``(half-extents, centres)``, each (N, 6, 3), of N chairs' parts (:data:`CHAIR_PARTS`) in the chair frame:
+    the seat (its top at ``seat_height``), the back behind it, a leg under each corner of the seat; ``params``
+    (N, 7) :class:`Chair`'s fields in order. numpy or torch alike."""
+    xp = namespace(params)
+    height, width, depth, thick, back_h, back_t, leg_w = (params[:, i] for i in range(7))
+    hw, hd, lw, zero = width / 2, depth / 2, leg_w / 2, 0 * height
+    leg_h = height - thick
+
+    def v(x, y, z):
+        return xp.stack([x, y, z], 1)
+
+    legs = [(sx, sy) for sx, sy in [(1, 1), (1, -1), (-1, 1), (-1, -1)]]
+    half = [v(hd, hw, thick / 2), v(back_t / 2, hw, back_h / 2)] + [v(lw, lw, leg_h / 2)] * 4
+    centre = [v(zero, zero, height - thick / 2), v(-hd + back_t / 2, zero, height + back_h / 2)]
+    centre += [v(sx * (hd - lw), sy * (hw - lw), leg_h / 2) for sx, sy in legs]
+    return xp.stack(half, 1), xp.stack(centre, 1)
 
 
 ObjectGeometry = Primitive | MeshGeometry | Chair

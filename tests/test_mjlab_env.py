@@ -8,8 +8,10 @@ import pytest
 import torch
 
 from pipeline.errors import InputError
+from pipeline.geometry import Primitive
 from train import rewards as R
 from train.env import EnvConfig, InteractionEnv
+from train.mjlab_object import MODEL_FIELDS
 from train.post_env import PostEnvConfig, task_rewards
 from train.randomize import RandomizationConfig, draw, stack
 
@@ -20,29 +22,33 @@ NO_NOISE = replace(RandomizationConfig(), cylinder_prob=0.0, df_noise=(0.0, 0.0,
 
 
 @pytest.fixture(scope="module")
-def box_episodes(bc_corpus):
-    return [e for e in bc_corpus[0] if e.task != "SitStand"]
+def episodes(bc_corpus):
+    return bc_corpus[0]
 
 
 @pytest.fixture(scope="module")
-def mjlab_env(box_episodes):
+def mjlab_env(episodes):
     from train.mjlab_env import MjlabPostTrainEnv
 
-    env = MjlabPostTrainEnv(box_episodes, 3, PostEnvConfig(envs=2, seed=1, randomization=NO_NOISE), device="cpu")
+    env = MjlabPostTrainEnv(episodes, 3, PostEnvConfig(envs=2, seed=1, randomization=NO_NOISE), device="cpu")
     yield env
     env.close()
 
 
-def test_the_same_state_gives_the_same_observation_and_reward(box_episodes, mjlab_env):
+def test_the_same_state_gives_the_same_observation_and_reward(episodes, mjlab_env):
+    """World 0 runs a box episode without restitution, world 1 a chair (SitStand) with a contact spring, each at its
+    own drawn per-axis scale: the model fields of its object are the CPU scene's, and so are the observations and
+    the reward terms."""
     from train import mjlab_terms as M
 
     rng = np.random.default_rng(5)
-    assignments = [(i, replace(draw(NO_NOISE, rng), cylinder=False)) for i in (0, 1)]
-    assignments[0] = (0, replace(assignments[0][1], restitution=0.0))  # one world without, one with a contact spring
-    assert assignments[1][1].restitution > 0
+    box, chair = (next(i for i, e in enumerate(episodes) if (e.task == "SitStand") == c) for c in (False, True))
+    assignments = [(i, replace(draw(NO_NOISE, rng), cylinder=False)) for i in (box, chair)]
+    assignments[0] = (box, replace(assignments[0][1], restitution=0.0))
+    assert assignments[1][1].restitution > 0 and len(set(assignments[1][1].scale)) == 3
     cpu = InteractionEnv(EnvConfig())
-    cpu.reset([(box_episodes[e], v.scale, v) for e, v in assignments])
-    actions = [np.stack([box_episodes[e].simulated.action[t] for e, _ in assignments]) for t in range(6)]
+    cpu.reset([(episodes[e], v.scale, v) for e, v in assignments])
+    actions = [np.stack([episodes[e].simulated.action[t] for e, _ in assignments]) for t in range(6)]
     for a in actions:
         obs, _ = cpu.step(a)
     want_reward, want_terms = task_rewards(cpu, actions[-1], actions[-2], R.RewardWeights())
@@ -66,23 +72,7 @@ def test_the_same_state_gives_the_same_observation_and_reward(box_episodes, mjla
     native, warp = cpu.slots[0].scene.model.opt, env.sim.mj_model.opt  # the solver options mjlab_env._options copies
     for name in ("timestep", "integrator", "cone", "impratio"):
         assert getattr(warp, name) == getattr(native, name), name
-    obj = env.scene["object"]
-    g, b = obj.indexing.geom_ids[0], obj.indexing.body_ids[0]
-    for i, slot in enumerate(cpu.slots):  # the object as the CPU scene built it: size, mass, friction, restitution
-        m0, b0 = slot.scene.model, slot.scene.object_body_id[slot.objects[0].name]
-        g0 = int(np.flatnonzero(m0.geom_bodyid == b0)[0])
-        for field, mine, want in [("geom_size", env.sim.model.geom_size[i, g], m0.geom_size[g0]),
-                                 ("geom_friction", env.sim.model.geom_friction[i, g], m0.geom_friction[g0]),
-                                 ("geom_solref", env.sim.model.geom_solref[i, g], m0.geom_solref[g0]),
-                                 ("geom_solimp", env.sim.model.geom_solimp[i, g], m0.geom_solimp[g0]),
-                                 ("body_mass", env.sim.model.body_mass[i, b], m0.body_mass[b0]),
-                                 ("body_inertia", env.sim.model.body_inertia[i, b], m0.body_inertia[b0]),
-                                 ("body_subtreemass", env.sim.model.body_subtreemass[i, [0, b]],
-                                  m0.body_subtreemass[[0, b0]]),
-                                 ("body_invweight0", env.sim.model.body_invweight0[i, b], m0.body_invweight0[b0]),
-                                 ("dof_invweight0", env.sim.model.dof_invweight0[i, obj.indexing.free_joint_v_adr],
-                                  m0.dof_invweight0[m0.body_dofadr[b0] : m0.body_dofadr[b0] + 6])]:  # fmt: skip
-            np.testing.assert_allclose(np.asarray(mine.cpu()), want, rtol=1e-5, err_msg=f"world {i} {field}")
+    _check_object_fields(env, cpu)
     for key, atol in (("proprio", 1e-5), ("root_command", 1e-5), ("df", 1e-4)):
         np.testing.assert_allclose(got[key].numpy(), getattr(obs, key), atol=atol, err_msg=key)
     env.termination_manager.compute()
@@ -97,6 +87,44 @@ def test_the_same_state_gives_the_same_observation_and_reward(box_episodes, mjla
         assert float(v.mean()) == pytest.approx(want_terms[k], rel=1e-4, abs=1e-6), k
     assert float(R.total(terms, R.RewardWeights()).sum()) == pytest.approx(float(want_reward.sum()), rel=1e-4)
     assert want_terms["action_rate"] > 0 and 0 < want_terms["object_tracking"] < 1  # the terms are not trivially 0
+
+
+def _check_object_fields(env, cpu) -> None:
+    """Each world's object as the CPU scene built it: part sizes and positions, friction, restitution, mass, inertia
+    (the tensor about the centre of mass: MuJoCo's principal axes may come in another order) and the constants
+    ``mj_setConst`` derives."""
+    from mujoco import mju_quat2Mat
+
+    obj = env.scene["object"]
+    g, b = np.asarray(obj.indexing.geom_ids.cpu()), int(obj.indexing.body_ids[0])
+    dofs = np.asarray(obj.indexing.free_joint_v_adr.cpu())
+    mine = {k: np.asarray(getattr(env.sim.model, k).cpu(), dtype=float) for k in MODEL_FIELDS}
+
+    def tensor(quat, diag):
+        r = np.empty(9)
+        mju_quat2Mat(r, quat)
+        return r.reshape(3, 3) @ np.diag(diag) @ r.reshape(3, 3).T
+
+    for i, slot in enumerate(cpu.slots):
+        m0, b0 = slot.scene.model, slot.scene.object_body_id[slot.objects[0].name]
+        g0 = np.flatnonzero(m0.geom_bodyid == b0)
+        k, gi = len(g0), g[: len(g0)]
+        pairs = [("geom_size", mine["geom_size"][i, gi], m0.geom_size[g0]),
+                 ("geom_pos", mine["geom_pos"][i, gi], m0.geom_pos[g0]),
+                 ("geom_friction", mine["geom_friction"][i, gi], m0.geom_friction[g0]),
+                 ("geom_solref", mine["geom_solref"][i, gi], m0.geom_solref[g0]),
+                 ("geom_solimp", mine["geom_solimp"][i, gi], m0.geom_solimp[g0]),
+                 ("body_mass", mine["body_mass"][i, b], m0.body_mass[b0]),
+                 ("body_ipos", mine["body_ipos"][i, b], m0.body_ipos[b0]),
+                 ("inertia tensor", tensor(mine["body_iquat"][i, b], mine["body_inertia"][i, b]),
+                  tensor(m0.body_iquat[b0], m0.body_inertia[b0])),
+                 ("body_subtreemass", mine["body_subtreemass"][i, [0, b]], m0.body_subtreemass[[0, b0]]),
+                 ("body_invweight0", mine["body_invweight0"][i, b], m0.body_invweight0[b0]),
+                 ("dof_invweight0", mine["dof_invweight0"][i, dofs],
+                  m0.dof_invweight0[m0.body_dofadr[b0] : m0.body_dofadr[b0] + 6])]  # fmt: skip
+        for field, got, want in pairs:
+            np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7, err_msg=f"world {i} ({k} parts) {field}")
+        assert (mine["geom_size"][i, g[k:]] <= 1e-4).all()  # a box world's unused parts (train.mjlab_object)
 
 
 def test_a_step_restarts_and_hands_rsl_rl_what_the_cpu_environment_does(mjlab_env):
@@ -124,18 +152,21 @@ def test_a_step_restarts_and_hands_rsl_rl_what_the_cpu_environment_does(mjlab_en
     assert (env.env.episode_length_buf == 0).all()
 
 
-def test_a_chair_is_a_one_line_error(bc_corpus):
-    from train.mjlab_terms import check_box_episodes
+def test_an_object_neither_box_nor_chair_is_a_one_line_error(bc_corpus):
+    from train.mjlab_terms import check_episodes
 
-    chair = [e for e in bc_corpus[0] if e.task == "SitStand"]
-    with pytest.raises(InputError, match="objects.*one free box, not Chair"):
-        check_box_episodes(chair)
+    e = bc_corpus[0][0]
+    robot = e.simulated.robot
+    ball = replace(robot.objects[0], geometry=Primitive("sphere", (0.2,)))
+    ball_episode = replace(e, simulated=replace(e.simulated, robot=replace(robot, objects=(ball,))))
+    check_episodes(bc_corpus[0])
+    with pytest.raises(InputError, match="objects.*one box or chair, not sphere"):
+        check_episodes([ball_episode])
 
 
 def test_one_post_training_iteration_on_the_mjlab_backend(bc_corpus):
     """`train-aip --backend mjlab` at smoke scale on the CPU: PPO, AIP and AMP over the mjlab worlds into
-    runs/<RUN>/aip-mjlab/, a checkpoint and a report that names the backend; SitStand's chair is left to the CPU
-    backend, and said."""
+    runs/<RUN>/aip-mjlab/, a checkpoint and a report that names the backend."""
     import json
 
     from lessmimic.cli import main

@@ -18,7 +18,7 @@
 Measured on one H200 (``make bench-train-mjlab``, 4096 worlds, the default corpus's box episodes, the laptop run's
 policy), three versions: restarts as a Python loop of the numpy code, then drawn and started on the device for all
 worlds at once, then without MuJoCo Warp's ``set_const`` (the object's derived constants written directly,
-:data:`train.mjlab_terms.MODEL_FIELDS`):
+:func:`train.mjlab_object.rigid_body`):
 
 ==========================================  ==========  ==========  =============
 env steps/s                                  loop        batched     no set_const
@@ -33,10 +33,12 @@ PPO + randomisations + AIP + AMP             21k (+7%)   25k (+14%)  36k (+10%)
 (5 PPO iterations per case in the first two columns, 3 in the last; the physics row moved by 12% between machines.)
 
 :class:`MjlabPostTrainEnv` is rsl_rl's ``VecEnv`` over it with :class:`train.post_env.PostTrainEnv`'s observations
-and extras, so :mod:`train.aip` trains either. Not on this backend yet (a one-line error, or left out and said so):
-objects other than one free box (chairs, meshes: mjlab fixes a world's geom types at start-up; meshes need
-mjlab's pre-built variants), the box drawn as a cylinder, and the fall test reads the torso's
-orientation one physics step stale (mjlab computes terminations before its single ``forward``).
+and extras, so :mod:`train.aip` trains either. It runs the episodes of one box or one chair, the four tasks of the
+default corpus (:mod:`train.mjlab_object`: every world's object has the most box parts any episode needs). Not on
+this backend yet (a one-line error, or left out and said so): mesh objects (mjlab fixes a world's mesh at start-up:
+they need its pre-built variants) and the box drawn as a cylinder (a per-axis scaled cylinder is a mesh); the fall
+test reads the torso's orientation one physics step stale (mjlab computes terminations before its single
+``forward``).
 """
 
 from __future__ import annotations
@@ -77,17 +79,17 @@ from train.mjlab_terms import (
     NoisyJointTargetsCfg,
     Worlds,
     action_rate,
-    check_box_episodes,
+    check_episodes,
     fell,
     interaction,
     interaction_seen,
-    is_box,
     joint_limits,
     object_tracking,
     proprio,
     reference_end,
     root_command,
     root_tracking,
+    runs_on_mjlab,
     start_episodes,
     termination,
 )
@@ -97,20 +99,22 @@ DF_START = 2 * NUM_JOINTS + 6 + NUM_JOINTS + 12
 """Where the DF features start in the ``critic`` row ``[proprio (93), root_command (12), df]``."""
 
 CONTACTS, CONSTRAINT_ROWS = 64, 512
-"""Per world: MuJoCo Warp allocates contacts and constraint rows up front (the G1 standing with a box in its hands
-needed up to 96 rows with elliptic cones in a first 2-world run; past the limit contacts are dropped)."""
+"""Per world: MuJoCo Warp allocates contacts and constraint rows up front (past the limit contacts are dropped). The
+G1 standing with a box in its hands needed up to 96 rows with elliptic cones in a first 2-world run; the QP teacher
+in the native scene, at the end of each control step, measured up to 35 contacts and 105 rows with a box, 46 and 136
+sitting on a chair (4 episodes per task at scales 0.4, 1.0 and 1.6)."""
 
 
 def runnable_episodes(episodes: list[Episode]) -> list[Episode]:
-    """The episodes this backend runs (one box); says on stderr how many it leaves to the CPU backend, and is a
-    one-line error when none is left."""
-    keep = [e for e in episodes if is_box(e)]
+    """The episodes this backend runs (one box or chair); says on stderr how many it leaves to the CPU backend, and
+    is a one-line error when none is left."""
+    keep = [e for e in episodes if runs_on_mjlab(e)]
     if not keep:
-        check_box_episodes(episodes)
+        check_episodes(episodes)
     if len(keep) < len(episodes):
-        left = sorted({e.task for e in episodes if not is_box(e)})
-        print(f"mjlab backend: {len(keep)} of {len(episodes)} episodes; {', '.join(left)} (not one box) run on the "
-              "CPU backend only", file=sys.stderr)  # fmt: skip
+        left = sorted({e.task for e in episodes if not runs_on_mjlab(e)})
+        print(f"mjlab backend: {len(keep)} of {len(episodes)} episodes; {', '.join(left)} (not one box or chair) run "
+              "on the CPU backend only", file=sys.stderr)  # fmt: skip
     return keep
 
 
@@ -130,12 +134,13 @@ def env_cfg(worlds: Worlds, envs: int, history: int, weights: R.RewardWeights,
     profile = worlds.episodes[0].profile
     if any(e.profile != profile for e in worlds.episodes):
         raise InputError(worlds.episodes[0].simulated.robot.source, "actuator_profile", "episodes of two profiles")
-    first = worlds.episodes[0].simulated.robot.objects[0]
+    shapes = worlds.shapes  # the object entity has the most parts any episode needs (train.mjlab_object)
+    first = worlds.episodes[int(shapes.chair.int().argmax()) if shapes.parts > 1 else 0].simulated.robot.objects[0]
     robot = EntityCfg(
         spec_fn=lambda: _robot_spec(profile),
         articulation=EntityArticulationInfoCfg(actuators=(XmlActuatorCfg(target_names_expr=(".*_joint",)),)),
     )
-    box = EntityCfg(spec_fn=lambda: object_spec(SceneObject("object", first.geometry, first.physics())))
+    obj = EntityCfg(spec_fn=lambda: object_spec(SceneObject("object", first.geometry, first.physics())))
     w, lw = {"worlds": worlds}, {"worlds": worlds, "links": links}
 
     def obs(func, params=None, steps=0) -> ObservationTermCfg:
@@ -150,7 +155,7 @@ def env_cfg(worlds: Worlds, envs: int, history: int, weights: R.RewardWeights,
     frames = int(worlds.frames.max())
     return ManagerBasedRlEnvCfg(
         decimation=SUBSTEPS,
-        scene=SceneCfg(num_envs=envs, entities={"robot": robot, "object": box}),
+        scene=SceneCfg(num_envs=envs, entities={"robot": robot, "object": obj}),
         sim=SimulationCfg(nconmax=CONTACTS, njmax=CONSTRAINT_ROWS, mujoco=MujocoCfg(**_options())),
         observations={"policy": ObservationGroupCfg(terms=policy), "critic": ObservationGroupCfg(terms=critic)},
         actions={

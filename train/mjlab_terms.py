@@ -17,18 +17,14 @@ from features.compute import FeatureConfig
 from physicalize.rollout import FALL_HEIGHT_DROP, FALL_TILT_COS
 from pipeline.distance.field import boxes_query_links
 from pipeline.errors import InputError
-from pipeline.geometry import Primitive
 from pipeline.robot import NQ_ROBOT, NUM_JOINTS, NV_ROBOT
-from pipeline.scene import (
-    RESTITUTION_SOLIMP,
-    build_spec,
-    restitution_solref,
-)
+from pipeline.scene import build_spec
 from pipeline.terms.interaction import interaction_features
 from pipeline.terms.link_motion import link_motion, link_velocity
 from pipeline.terms.observations import command_frames, proprioception, root_command_to
 from train import rewards as R
 from train.episodes import Episode
+from train.mjlab_object import MODEL_FIELDS, Shapes, is_box, is_chair, write_object
 from train.randomize import (
     INITIAL_STATE,
     RandomizationConfig,
@@ -39,37 +35,32 @@ from train.randomize import (
     turn,
 )
 
-MODEL_FIELDS = ("geom_size", "geom_rbound", "geom_aabb", "geom_friction", "geom_solref", "geom_solimp", "body_mass",
-                "body_inertia", "body_subtreemass", "body_invweight0", "dof_invweight0")  # fmt: skip
-"""The object's model fields each world holds its own copy of: its episode's size, mass, inertia, friction and
-restitution, and the constants MuJoCo derives from the mass (``mj_setConst``), written directly (:meth:`Worlds.start`):
-MuJoCo Warp's ``set_const`` recomputes them for every world in ~1400 kernel launches (41 dofs, 31 bodies x 6 rows;
-counted on the CPU), at every restart."""
 
-
-def check_box_episodes(episodes: list[Episode]) -> None:
-    """One-line error for an episode this backend cannot run: anything but one box primitive."""
+def check_episodes(episodes: list[Episode]) -> None:
+    """One-line error for an episode this backend cannot run: anything but one box or one chair."""
     for e in episodes:
-        if not is_box(e):
+        if not runs_on_mjlab(e):
             objects = e.simulated.robot.objects
-            what = type(objects[0].geometry).__name__ if len(objects) == 1 else f"{len(objects)} objects"
-            raise InputError(e.simulated.robot.source, "objects", f"the mjlab backend runs one free box, not {what}")
+            g = objects[0].geometry if len(objects) == 1 else None
+            what = f"{len(objects)} objects" if g is None else getattr(g, "kind", type(g).__name__)
+            why = f"the mjlab backend runs one box or chair, not {what}"
+            raise InputError(e.simulated.robot.source, "objects", why)
 
 
-def is_box(e: Episode) -> bool:
-    objects = e.simulated.robot.objects
-    return len(objects) == 1 and isinstance(objects[0].geometry, Primitive) and objects[0].geometry.kind == "box"
+def runs_on_mjlab(e: Episode) -> bool:
+    return is_box(e) or is_chair(e)
 
 
 class Worlds:
     """The episodes' reference tracks on the device (padded with their last frame to the longest) and what each
-    world runs: its episode, the object's size and height shift at the drawn scale, the command offset.
+    world runs: its episode, the object's parts (:class:`train.mjlab_object.Shapes`) and height shift at the drawn
+    scale, the command offset.
 
     :meth:`start` writes episodes into worlds; :func:`start_episodes` draws them (:meth:`draw`)."""
 
     def __init__(self, episodes: list[Episode], envs: int, randomization: RandomizationConfig, seed: int,
                  device: str, horizon_s: float = FeatureConfig().root_horizon_s):  # fmt: skip
-        check_box_episodes(episodes)
+        check_episodes(episodes)
         self.episodes, self.randomization, self.device = episodes, randomization, torch.device(device)
         self.torch_rng = torch.Generator(device=self.device).manual_seed(seed)
         frames = [e.simulated.frames for e in episodes]
@@ -89,14 +80,11 @@ class Worlds:
         self.command = stack(lambda e: command_frames(e.simulated.frames, e.simulated.robot.fps, horizon_s))
         self.torso_up = stack(lambda e: _torso_up(e.simulated))
         self.episode = torch.zeros(envs, dtype=torch.long, device=device)
-        self.half = torch.ones(envs, 3, device=device)
+        self.shapes = Shapes(episodes, self.device)
+        self.half = torch.ones(envs, self.shapes.parts, 3, device=device)
+        self.centre = torch.zeros(envs, self.shapes.parts, 3, device=device)
         self.dz = torch.zeros(envs, device=device)
         self.command_offset = torch.zeros(envs, 3, device=device)
-        physics = [e.simulated.robot.objects[0].physics() for e in episodes]
-        self.half0 = torch.as_tensor(np.array([e.simulated.robot.objects[0].geometry.half_extents for e in episodes]),
-                                     dtype=torch.float32, device=device)  # fmt: skip
-        self.mass0 = torch.as_tensor([p.mass for p in physics], dtype=torch.float32, device=device)
-        self.friction0 = torch.as_tensor([p.friction for p in physics], dtype=torch.float32, device=device)
         self.joint_range = build_spec((), episodes[0].profile).compile().jnt_range[1 : 1 + NUM_JOINTS]
         self.joint_limits = torch.as_tensor(self.joint_range.T, dtype=torch.float32, device=device)  # (lower, upper)
         self._bodies: dict[tuple[str, ...], torch.Tensor] = {}
@@ -126,40 +114,18 @@ class Worlds:
         :class:`train.env._Slot` builds it, all worlds at once, and the object's model fields."""
         v = {k: torch.as_tensor(a, device=self.device).to(torch.float32) for k, a in draws.items()}
         e = torch.as_tensor(episode, device=self.device)
-        half = self.half0[e] * v["scale"]
-        dz = half[:, 2] - self.half0[e, 2]  # a box's centre rises with its half-height (train.episodes.scaled_objects)
-        box = self.object[e, 0].clone()
-        box[:, 2] += dz
-        qpos = torch.cat([self.qpos[e, 0], box], 1)
+        dz = self.shapes.floor_shift(e, v["scale"])
+        start = self.object[e, 0].clone()
+        start[:, 2] += dz
+        qpos = torch.cat([self.qpos[e, 0], start], 1)
         qpos = perturbed_initial_state(qpos, self.joint_range, [NQ_ROBOT], *(v[k] for k in INITIAL_STATE))
-        self.episode[ids], self.half[ids], self.dz[ids] = e, half, dz
+        self.episode[ids], self.dz[ids] = e, dz
+        self.half[ids], self.centre[ids], _ = self.shapes.at(e, v["scale"])
         self.command_offset[ids] = v["command_offset"]
-        d, m = env.sim.data, env.sim.model
+        d = env.sim.data
         d.qpos[ids] = qpos
         d.qvel[ids] = torch.cat([self.qvel[e, 0], torch.zeros(len(e), 6, device=self.device)], 1)
-        obj = env.scene["object"]
-        g, b = obj.indexing.geom_ids[0], obj.indexing.body_ids[0]
-        mass = self.mass0[e] * v["mass_factor"]  # train.randomize.object_physics
-        m.geom_size[ids, g] = half
-        m.geom_rbound[ids, g] = half.norm(dim=1)
-        m.geom_aabb[ids, g] = torch.stack([torch.zeros_like(half), half], 1)  # (centre, half-size)
-        m.geom_friction[ids, g, 0] = self.friction0[e] * v["friction_factor"]
-        e_rest = v["restitution"]
-        bouncy = (e_rest > 0)[:, None]
-        solref = restitution_solref(e_rest.clamp(min=1e-6))  # pipeline.scene: a contact spring where e > 0
-        m.geom_solref[ids, g] = torch.where(bouncy, solref, env.sim.get_default_field("geom_solref")[g])
-        solimp = torch.as_tensor(RESTITUTION_SOLIMP, device=self.device)
-        m.geom_solimp[ids, g] = torch.where(bouncy, solimp, env.sim.get_default_field("geom_solimp")[g])
-        inertia = mass[:, None] / 3 * (half.square().sum(1, keepdim=True) - half.square())  # a box about its centre
-        world_mass = env.sim.get_default_field("body_subtreemass")[0] - env.sim.get_default_field("body_mass")[b]
-        m.body_mass[ids, b], m.body_inertia[ids, b] = mass, inertia
-        # what mj_setConst derives for a free box (its own tree, centre of mass at its origin): the subtree masses,
-        # and the mean diagonal of J M^-1 J' over translation (1/m) and rotation (mean 1/I) rows, per body and dof;
-        # left at the compiled model's: stat.meaninertia (the solver's scale, the mean of M's diagonal over 41 dofs)
-        m.body_subtreemass[ids, b], m.body_subtreemass[ids, 0] = mass, world_mass + mass
-        invweight = torch.stack([1 / mass, (1 / inertia).mean(1)], 1)
-        m.body_invweight0[ids, b] = invweight
-        m.dof_invweight0[ids[:, None], obj.indexing.free_joint_v_adr] = invweight.repeat_interleave(3, 1)
+        write_object(env, ids, self.shapes, e, v)
 
 
 def _torso_up(sim) -> np.ndarray:
@@ -221,12 +187,15 @@ def root_command(env: ManagerBasedRlEnv, worlds: Worlds) -> torch.Tensor:
 
 
 def interaction(env: ManagerBasedRlEnv, worlds: Worlds, links: tuple[str, ...]) -> torch.Tensor:
-    """(N, 10 K) u_t per DF link (:func:`pipeline.terms.interaction.interaction_features`) against the world's box
-    at its half-extents (:func:`pipeline.distance.field.boxes_query_links`, as the CPU environment queries boxes)."""
+    """(N, 10 K) u_t per DF link (:func:`pipeline.terms.interaction.interaction_features`) against the world's
+    object, its box parts at their half-extents and centres (:func:`pipeline.distance.field.boxes_query_links`, as
+    the CPU environment queries boxes and chairs)."""
     d, ids = env.sim.data, worlds.bodies(env, links)
     pos = d.xpos[:, ids]
     vel = link_velocity(pos, d.cvel[:, ids], d.subtree_com[:, env.scene["robot"].indexing.root_body_id][:, None])
-    phi, grad = boxes_query_links(pos, d.qpos[:, NQ_ROBOT : NQ_ROBOT + 7], worlds.half)
+    pose = d.qpos[:, NQ_ROBOT : NQ_ROBOT + 7]
+    parts = (worlds.half[:, 0],) if worlds.shapes.parts == 1 else (worlds.half, worlds.centre)
+    phi, grad = boxes_query_links(pos, pose, *parts)
     return interaction_features(phi, grad, vel).reshape(len(pos), -1)
 
 

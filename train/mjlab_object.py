@@ -1,0 +1,150 @@
+"""The object of each mjlab world (:mod:`train.mjlab_env`): a free body made of box parts -- one box, or a chair's
+six (:func:`pipeline.geometry.chair_boxes`) -- whose sizes, mass, inertia, friction and restitution each world holds
+its own copy of, written at every restart from the episode and its draw.
+
+MuJoCo Warp fixes the number of geoms at start-up, the same in every world, so when the episodes hold both a box and
+a chair every world's object has six box geoms: a box world fills the first with its box and shrinks the other five
+to :data:`PAD_HALF` at its centre, inside it, where nothing reaches them (the robot's links and the floor touch the
+box's faces; the field's nearest part outside the box is the box itself, the pads being inside it).
+
+The mass of a part is the object's mass times its share of the parts' volume (as :func:`pipeline.scene.build_spec`
+builds it); what MuJoCo derives at compile time from the parts is written directly (:func:`rigid_body`), not by
+MuJoCo Warp's ``set_const`` (~1400 kernel launches per call; measured in :mod:`train.mjlab_env`)."""
+
+from __future__ import annotations
+
+from dataclasses import astuple
+
+import numpy as np
+import torch
+
+from pipeline.geometry import Chair, Primitive, chair_boxes, chair_scaled
+from pipeline.scene import RESTITUTION_SOLIMP, restitution_solref
+from train.episodes import Episode
+
+PAD_HALF = 1e-4
+"""[m] half-extent of a box world's unused parts (MuJoCo needs positive sizes)."""
+
+MODEL_FIELDS = ("geom_size", "geom_pos", "geom_rbound", "geom_aabb", "geom_friction", "geom_solref", "geom_solimp",
+                "body_mass", "body_ipos", "body_iquat", "body_inertia", "body_subtreemass", "body_invweight0",
+                "dof_invweight0")  # fmt: skip
+"""The model fields each world holds its own copy of (mjlab's ``requires_model_fields``)."""
+
+
+def is_box(e: Episode) -> bool:
+    objects = e.simulated.robot.objects
+    return len(objects) == 1 and isinstance(objects[0].geometry, Primitive) and objects[0].geometry.kind == "box"
+
+
+def is_chair(e: Episode) -> bool:
+    objects = e.simulated.robot.objects
+    return len(objects) == 1 and isinstance(objects[0].geometry, Chair)
+
+
+class Shapes:
+    """The episodes' objects at scale 1 on the device: a box's half-extents or a chair's fields, mass and friction;
+    :attr:`parts` per world (6 when any episode holds a chair, else 1)."""
+
+    def __init__(self, episodes: list[Episode], device: torch.device):
+        objects = [e.simulated.robot.objects[0] for e in episodes]
+        physics = [o.physics() for o in objects]
+
+        def tensor(values) -> torch.Tensor:
+            return torch.as_tensor(np.array(values, dtype=float), dtype=torch.float32, device=device)
+
+        self.chair = torch.as_tensor([is_chair(e) for e in episodes], device=device)
+        self.parts = 6 if bool(self.chair.any()) else 1
+        self.half = tensor([np.ones(3) if c else o.geometry.half_extents for o, c in zip(objects, self.chair)])
+        self.chair_fields = tensor([astuple(o.geometry if c else Chair()) for o, c in zip(objects, self.chair)])
+        self.mass = tensor([p.mass for p in physics])
+        self.friction = tensor([p.friction for p in physics])
+
+    def at(self, episode: torch.Tensor, scale: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(half-extents, centres, real)`` of the parts, (n, P, 3), (n, P, 3), (n, P), of episodes ``episode`` at
+        the per-axis ``scale`` (n, 3): the box scaled, or :meth:`pipeline.geometry.Chair.scaled`'s parts; ``real``
+        is False for a box world's pads."""
+        box = self.half[episode] * scale
+        if self.parts == 1:
+            return box[:, None], torch.zeros_like(box)[:, None], torch.ones_like(box[:, :1], dtype=torch.bool)
+        n = len(episode)
+        half, centre = chair_boxes(chair_scaled(self.chair_fields[episode], scale))
+        chair = self.chair[episode]
+        pads = torch.full((n, self.parts - 1, 3), PAD_HALF, device=box.device)
+        half = torch.where(chair[:, None, None], half, torch.cat([box[:, None], pads], 1))
+        centre = torch.where(chair[:, None, None], centre, torch.zeros_like(centre))
+        real = chair[:, None] | (torch.arange(self.parts, device=box.device) == 0)
+        return half, centre, real
+
+    def floor_shift(self, episode: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
+        """(n,) how far the object's frame rises at ``scale`` so that what rested on the floor still does: a box's
+        centre with its half-height; a chair's frame is on the floor (:func:`train.episodes.scaled_objects`)."""
+        return torch.where(self.chair[episode], 0.0, self.half[episode, 2] * (scale[:, 2] - 1))
+
+
+def rigid_body(mass: torch.Tensor, half: torch.Tensor, centre: torch.Tensor, real: torch.Tensor) -> dict:
+    """What MuJoCo's compiler and ``mj_setConst`` derive for a free body of box parts (n worlds), its mass spread by
+    volume: ``ipos`` (n, 3) the centre of mass; ``inertia`` (n, 3) the principal moments, about the axes ``iquat``
+    (n, 4) turns the body frame to; ``invweight`` (n, 2) the body's mean inverse weight over translation and rotation
+    at its centre of mass (1/m, tr(I^-1)/3), and ``dof_invweight`` (n, 6) the free joint's, ``M^-1``'s diagonal
+    blocks at the body's origin: translation ``1/m + (|c|^2 tr A - c'Ac) / 3`` (``A = I^-1``, ``c`` the centre of
+    mass), rotation ``tr A / 3``.
+
+    The objects are symmetric about their xz-plane (a box, a chair): y is a principal axis and the other two are
+    turned about y by ``theta = atan2(-2 I_xz s, |I_xx - I_zz|) / 2``, ``s`` the sign of ``I_xx - I_zz``, which keeps
+    a box's axes its own (theta = 0)."""
+    volume = 8 * half.prod(-1) * real
+    m = mass[:, None] * volume / volume.sum(1, keepdim=True)  # (n, P)
+    com = (m[..., None] * centre).sum(1) / mass[:, None]
+    d = centre - com[:, None]
+    eye = torch.eye(3, device=mass.device)
+    own = torch.diag_embed(m[..., None] / 3 * (half.square().sum(-1, keepdim=True) - half.square()))
+    shift = m[..., None, None] * (d.square().sum(-1)[..., None, None] * eye - d[..., :, None] * d[..., None, :])
+    tensor = (own + shift).sum(1)  # about the centre of mass, body axes
+    ixx, iyy, izz, ixz = tensor[:, 0, 0], tensor[:, 1, 1], tensor[:, 2, 2], tensor[:, 0, 2]
+    sign = torch.where(ixx >= izz, 1.0, -1.0)
+    r = torch.hypot(ixx - izz, 2 * ixz)
+    theta = torch.atan2(-2 * ixz * sign, (ixx - izz).abs()) / 2
+    mean = (ixx + izz) / 2
+    inertia = torch.stack([mean + sign * r / 2, iyy, mean - sign * r / 2], 1)
+    zero = torch.zeros_like(theta)
+    iquat = torch.stack([torch.cos(theta / 2), zero, torch.sin(theta / 2), zero], 1)
+    inverse = torch.linalg.inv(tensor)
+    trace = inverse.diagonal(dim1=1, dim2=2).sum(1)
+    c_ac = (com[:, None] @ inverse @ com[:, :, None]).reshape(-1)
+    translation = 1 / mass + (com.square().sum(1) * trace - c_ac) / 3
+    return {
+        "ipos": com,
+        "inertia": inertia,
+        "iquat": iquat,
+        "invweight": torch.stack([1 / mass, trace / 3], 1),
+        "dof_invweight": torch.stack([translation] * 3 + [trace / 3] * 3, 1),
+    }
+
+
+def write_object(env, ids: torch.Tensor, shapes: Shapes, episode: torch.Tensor, draws: dict) -> None:
+    """Worlds ``ids`` take their episodes' objects under ``draws`` (:func:`train.randomize.draw_batch`'s, as
+    tensors): part sizes and positions, mass (:func:`train.randomize.object_physics`), inertia, friction,
+    restitution (:func:`pipeline.scene.restitution_solref`: a contact spring where it is drawn above 0) and the
+    derived constants (:func:`rigid_body`)."""
+    m, obj = env.sim.model, env.scene["object"]
+    g, b = obj.indexing.geom_ids, obj.indexing.body_ids[0]
+    half, centre, real = shapes.at(episode, draws["scale"])
+    mass = shapes.mass[episode] * draws["mass_factor"]
+    rows, cols = ids[:, None], g[None]
+    m.geom_size[rows, cols], m.geom_pos[rows, cols] = half, centre
+    m.geom_rbound[rows, cols] = half.norm(dim=-1)
+    m.geom_aabb[rows, cols] = torch.stack([torch.zeros_like(half), half], 2)  # (centre, half-size), geom frame
+    m.geom_friction[rows, cols, 0] = (shapes.friction[episode] * draws["friction_factor"])[:, None]
+    e_rest = draws["restitution"]
+    bouncy = (e_rest > 0)[:, None, None]
+    solref = restitution_solref(e_rest.clamp(min=1e-6))[:, None]
+    m.geom_solref[rows, cols] = torch.where(bouncy, solref, env.sim.get_default_field("geom_solref")[g])
+    solimp = torch.as_tensor(RESTITUTION_SOLIMP, device=mass.device, dtype=mass.dtype)
+    m.geom_solimp[rows, cols] = torch.where(bouncy, solimp, env.sim.get_default_field("geom_solimp")[g])
+    body = rigid_body(mass, half, centre, real)
+    world_mass = env.sim.get_default_field("body_subtreemass")[0] - env.sim.get_default_field("body_mass")[b]
+    m.body_mass[ids, b], m.body_ipos[ids, b], m.body_iquat[ids, b] = mass, body["ipos"], body["iquat"]
+    m.body_inertia[ids, b] = body["inertia"]
+    m.body_subtreemass[ids, b], m.body_subtreemass[ids, 0] = mass, world_mass + mass
+    m.body_invweight0[ids, b] = body["invweight"]
+    m.dof_invweight0[ids[:, None], obj.indexing.free_joint_v_adr] = body["dof_invweight"]
