@@ -130,6 +130,8 @@ def _check_object_fields(env, cpu) -> None:
 def test_a_step_restarts_and_hands_rsl_rl_what_the_cpu_environment_does(mjlab_env):
     """``policy`` is 3-step windows in flatten_windows' layout (a start fills its window), ``critic`` the current
     step; the style extras are the DF features and the AMP transition; a finished episode restarts."""
+    from train import mjlab_terms as M
+
     env = mjlab_env
     env.env.reset()
     env.obs = env.env.reset()[0]
@@ -138,6 +140,10 @@ def test_a_step_restarts_and_hands_rsl_rl_what_the_cpu_environment_does(mjlab_en
     windows = torch.split(obs["policy"], [3 * d for d in dims], dim=1)
     for w, c, d in zip(windows, torch.split(obs["critic"], list(dims), dim=1), dims):
         torch.testing.assert_close(w.reshape(2, 3, d), c[:, None].expand(2, 3, d))
+    worlds, links = env.worlds, EnvConfig().links  # the managers' terms read the episodes the restarts wrote
+    direct = [M.proprio(env.env), M.root_command(env.env, worlds), M.interaction(env.env, worlds, links)]
+    torch.testing.assert_close(obs["critic"], torch.cat(direct, 1))
+    assert len(set(worlds.episode.tolist())) == 2  # the two worlds run two episodes (seed 1)
     hold = obs["critic"][:, :29].clone()
     before = obs["critic"][:, :64].clone()
     nxt, reward, done, extras = env.step(hold)

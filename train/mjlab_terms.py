@@ -89,6 +89,12 @@ class Worlds:
         self.joint_limits = torch.as_tensor(self.joint_range.T, dtype=torch.float32, device=device)  # (lower, upper)
         self._bodies: dict[tuple[str, ...], torch.Tensor] = {}
 
+    def __deepcopy__(self, memo) -> Worlds:
+        """Shared, never copied: mjlab's managers deep-copy their terms' configurations, and every term must read
+        what the restart event writes (with a copy per manager, the observation and reward terms read episode 0 and
+        the first size in every world, whatever the worlds ran)."""
+        return self
+
     def index(self, env: ManagerBasedRlEnv) -> tuple[torch.Tensor, torch.Tensor]:
         """``(episode, frame)`` per world: the reference frame ``min(t, T - 1)`` at the world's step ``t``."""
         e = self.episode
