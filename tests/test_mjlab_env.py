@@ -18,7 +18,7 @@ from train.randomize import RandomizationConfig, draw, stack
 pytestmark = pytest.mark.slow
 
 # every randomisation the mjlab worlds run, the per-step noises off so that one state gives one observation
-NO_NOISE = replace(RandomizationConfig(), cylinder_prob=0.0, df_noise=(0.0, 0.0, 0.0), action_noise_rad=0.0)
+NO_NOISE = replace(RandomizationConfig(), df_noise=(0.0, 0.0, 0.0), action_noise_rad=0.0)
 
 
 @pytest.fixture(scope="module")
@@ -35,16 +35,18 @@ def mjlab_env(episodes):
     env.close()
 
 
-def test_the_same_state_gives_the_same_observation_and_reward(episodes, mjlab_env):
-    """World 0 runs a box episode without restitution, world 1 a chair (SitStand) with a contact spring, each at its
-    own drawn per-axis scale: the model fields of its object are the CPU scene's, and so are the observations and
-    the reward terms."""
+@pytest.mark.parametrize("kinds", [("box", "chair"), ("cylinder", "box")])
+def test_the_same_state_gives_the_same_observation_and_reward(episodes, mjlab_env, kinds):
+    """Two worlds run the two ``kinds`` of object (a box episode, a chair's (SitStand), a box drawn as a cylinder),
+    the first without restitution, the second with a contact spring, each at its own drawn per-axis scale: the model
+    fields of its object are the CPU scene's, and so are the observations and the reward terms."""
     from train import mjlab_terms as M
 
     rng = np.random.default_rng(5)
     box, chair = (next(i for i, e in enumerate(episodes) if (e.task == "SitStand") == c) for c in (False, True))
-    assignments = [(i, replace(draw(NO_NOISE, rng), cylinder=False)) for i in (box, chair)]
-    assignments[0] = (box, replace(assignments[0][1], restitution=0.0))
+    pick = {"box": (box, False), "chair": (chair, False), "cylinder": (box, True)}
+    assignments = [(pick[k][0], replace(draw(NO_NOISE, rng), cylinder=pick[k][1])) for k in kinds]
+    assignments[0] = (assignments[0][0], replace(assignments[0][1], restitution=0.0))
     assert assignments[1][1].restitution > 0 and len(set(assignments[1][1].scale)) == 3
     cpu = InteractionEnv(EnvConfig())
     cpu.reset([(episodes[e], v.scale, v) for e, v in assignments])
@@ -93,7 +95,7 @@ def _check_object_fields(env, cpu) -> None:
     """Each world's object as the CPU scene built it: part sizes and positions, friction, restitution, mass, inertia
     (the tensor about the centre of mass: MuJoCo's principal axes may come in another order) and the constants
     ``mj_setConst`` derives."""
-    from mujoco import mju_quat2Mat
+    import mujoco
 
     obj = env.scene["object"]
     g, b = np.asarray(obj.indexing.geom_ids.cpu()), int(obj.indexing.body_ids[0])
@@ -102,13 +104,14 @@ def _check_object_fields(env, cpu) -> None:
 
     def tensor(quat, diag):
         r = np.empty(9)
-        mju_quat2Mat(r, quat)
+        mujoco.mju_quat2Mat(r, quat)
         return r.reshape(3, 3) @ np.diag(diag) @ r.reshape(3, 3).T
 
     for i, slot in enumerate(cpu.slots):
         m0, b0 = slot.scene.model, slot.scene.object_body_id[slot.objects[0].name]
         g0 = np.flatnonzero(m0.geom_bodyid == b0)
-        k, gi = len(g0), g[: len(g0)]
+        k = len(g0)
+        gi = g[-1:] if m0.geom_type[g0[0]] == mujoco.mjtGeom.mjGEOM_CYLINDER else g[:k]  # the cylinder slot is last
         pairs = [("geom_size", mine["geom_size"][i, gi], m0.geom_size[g0]),
                  ("geom_pos", mine["geom_pos"][i, gi], m0.geom_pos[g0]),
                  ("geom_friction", mine["geom_friction"][i, gi], m0.geom_friction[g0]),
@@ -124,7 +127,8 @@ def _check_object_fields(env, cpu) -> None:
                   m0.dof_invweight0[m0.body_dofadr[b0] : m0.body_dofadr[b0] + 6])]  # fmt: skip
         for field, got, want in pairs:
             np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7, err_msg=f"world {i} ({k} parts) {field}")
-        assert (mine["geom_size"][i, g[k:]] <= 1e-4).all()  # a box world's unused parts (train.mjlab_object)
+        pads = np.setdiff1d(g, gi)
+        assert (mine["geom_size"][i, pads] <= 1e-4).all()  # the slots this world does not use (train.mjlab_object)
 
 
 def test_a_step_restarts_and_hands_rsl_rl_what_the_cpu_environment_does(mjlab_env):

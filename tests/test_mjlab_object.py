@@ -8,7 +8,7 @@ import torch
 
 from pipeline.geometry import Chair, Primitive, chair_boxes, chair_scaled
 from pipeline.scene import ObjectPhysics, SceneObject, build_scene
-from train.mjlab_object import PAD_HALF, rigid_body
+from train.mjlab_object import PAD_HALF, Parts, rigid_body, slots
 
 SCALES = [(1.0, 1.0, 1.0), (0.4, 1.6, 0.9), (1.5, 0.5, 1.3)]
 
@@ -29,9 +29,16 @@ def _native(geometry, mass: float) -> dict:
     }
 
 
-def _mine(half, centre, real, mass: float) -> dict:
-    t = {k: torch.as_tensor(np.asarray(v)[None], dtype=torch.float64) for k, v in (("h", half), ("c", centre))}
-    body = rigid_body(torch.tensor([mass], dtype=torch.float64), t["h"], t["c"], torch.as_tensor(real)[None])
+def _mine(half, centre, real, mass: float, cylinder: tuple[float, float] | None = None) -> dict:
+    """:func:`rigid_body` of one world's slots (box parts, then the cylinder slot), in float64."""
+
+    def t(a, dtype=torch.float64):
+        return torch.as_tensor(np.asarray(a)[None], dtype=dtype)
+
+    radius, length = cylinder or (0.0, 0.0)
+    parts = Parts(t(half), t(centre), t(real, torch.bool), t(cylinder is not None, torch.bool), t(radius), t(length))
+    geoms = slots(parts, cylinders=True)
+    body = rigid_body(torch.tensor([mass], dtype=torch.float64), geoms["volume"], geoms["unit"], geoms["pos"])
     body = {k: v[0].numpy() for k, v in body.items()}
     r = np.empty(9)
     mujoco.mju_quat2Mat(r, body["iquat"])
@@ -60,6 +67,15 @@ def test_a_box_with_pads_is_the_box(scale):
     np.testing.assert_allclose(mine["iquat"], [1, 0, 0, 0])
     np.testing.assert_allclose(mine["inertia"], np.diag(native["tensor"]), rtol=1e-9)
     for key in ("ipos", "invweight", "dof_invweight"):
+        np.testing.assert_allclose(mine[key], native[key], rtol=1e-6, atol=1e-12, err_msg=key)
+
+
+def test_a_cylinder_with_pads_is_the_cylinder():
+    """A box drawn as a cylinder (train.randomize.vary_shape): its box parts are pads; MuJoCo's cylinder primitive."""
+    half = np.full((6, 3), PAD_HALF)
+    mine = _mine(half, np.zeros((6, 3)), np.zeros(6, bool), 2.5, cylinder=(0.12, 0.2))
+    native = _native(Primitive("cylinder", (0.12, 0.2)), 2.5)
+    for key in ("ipos", "tensor", "invweight", "dof_invweight"):
         np.testing.assert_allclose(mine[key], native[key], rtol=1e-6, atol=1e-12, err_msg=key)
 
 

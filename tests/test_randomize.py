@@ -1,5 +1,7 @@
 """The six post-training randomisations (train.randomize), each changing what it says and nothing else."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -44,6 +46,9 @@ def test_a_box_becomes_a_cylinder_of_its_height_and_mean_half_width_only_when_dr
     g = cyl.geometry
     assert g.kind == "cylinder" and g.size == pytest.approx((0.15, 0.15)) and g.scale == (1.0, 1.0, 1.0)
     np.testing.assert_array_equal(cyl.pose, BOX.pose)
+    scaled = replace(BOX, geometry=BOX.geometry.scaled((2.0, 1.0, 0.5)))  # the draw's scale, then the shape
+    g = vary_shape(scaled, Variation(cylinder=True)).geometry
+    assert g.size == pytest.approx((0.25, 0.075)) and g.scale == (1.0, 1.0, 1.0)  # circular: MuJoCo's primitive
     assert vary_shape(BOX, Variation(cylinder=False)) is BOX
     ball = ObjectTrack("ball", Primitive("sphere", (0.1,)), BOX.pose)
     assert vary_shape(ball, Variation(cylinder=True)) is ball

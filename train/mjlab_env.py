@@ -2,7 +2,7 @@
 ``ManagerBasedRlEnv`` over ``N`` worlds, so a GPU steps thousands of episodes at once. Nothing is written twice:
 
 * **scene**: the robot of :func:`pipeline.scene.build_spec` (the episodes' actuator profile, the floor, the solver
-  options) and the object of :func:`pipeline.scene.object_spec`, as two mjlab entities; the joint targets go
+  options) and the object of :func:`train.mjlab_object.entity_spec`, as two mjlab entities; the joint targets go
   through mjlab's joint-position action (absolute targets, scale 1) with the actuation noise added;
 * **observations, rewards, terminations**: plain term functions calling the CPU environment's own functions on
   torch tensors read from the warp data (:mod:`pipeline.terms.observations`, :mod:`pipeline.terms.interaction`,
@@ -31,14 +31,18 @@ PPO + randomisations + AIP + AMP             21k (+7%)   25k (+14%)  36k (+10%)
 ==========================================  ==========  ==========  =============
 
 (5 PPO iterations per case in the first two columns, 3 in the last; the physics row moved by 12% between machines.)
+These were measured on the box episodes alone, one box geom per world, and before :class:`train.mjlab_terms.Worlds`
+was shared by mjlab's managers (their terms read a stale copy, doing the same work per step on the wrong episode);
+the chairs' six parts and the cylinder slot have not been measured on a GPU.
 
 :class:`MjlabPostTrainEnv` is rsl_rl's ``VecEnv`` over it with :class:`train.post_env.PostTrainEnv`'s observations
 and extras, so :mod:`train.aip` trains either. It runs the episodes of one box or one chair, the four tasks of the
-default corpus (:mod:`train.mjlab_object`: every world's object has the most box parts any episode needs). Not on
-this backend yet (a one-line error, or left out and said so): mesh objects (mjlab fixes a world's mesh at start-up:
-they need its pre-built variants) and the box drawn as a cylinder (a per-axis scaled cylinder is a mesh); the fall
-test reads the torso's orientation one physics step stale (mjlab computes terminations before its single
-``forward``).
+default corpus, with the six randomisations (:mod:`train.mjlab_object`: every world's object has the most box parts
+any episode needs and a cylinder slot for the boxes drawn as cylinders). Not on this backend yet (a one-line error,
+or left out and said so): mesh objects (mjlab fixes a world's meshes at start-up: they need its pre-built variants).
+Two known differences from native MuJoCo: MuJoCo Warp makes at most one contact between a capsule (the G1's limbs)
+and the cylinder, and warns so at start-up; the fall test reads the torso's orientation one physics step stale
+(mjlab computes terminations before its single ``forward``).
 """
 
 from __future__ import annotations
@@ -71,10 +75,10 @@ from pipeline.scene import (
     PHYSICS_TIMESTEP,
     SceneObject,
     build_spec,
-    object_spec,
 )
 from train import rewards as R
 from train.episodes import Episode
+from train.mjlab_object import entity_spec
 from train.mjlab_terms import (
     NoisyJointTargetsCfg,
     Worlds,
@@ -140,7 +144,7 @@ def env_cfg(worlds: Worlds, envs: int, history: int, weights: R.RewardWeights,
         spec_fn=lambda: _robot_spec(profile),
         articulation=EntityArticulationInfoCfg(actuators=(XmlActuatorCfg(target_names_expr=(".*_joint",)),)),
     )
-    obj = EntityCfg(spec_fn=lambda: object_spec(SceneObject("object", first.geometry, first.physics())))
+    obj = EntityCfg(spec_fn=lambda: entity_spec(shapes, SceneObject("object", first.geometry, first.physics())))
     w, lw = {"worlds": worlds}, {"worlds": worlds, "links": links}
 
     def obs(func, params=None, steps=0) -> ObservationTermCfg:

@@ -15,7 +15,7 @@ from mjlab.managers.event_manager import requires_model_fields
 
 from features.compute import FeatureConfig
 from physicalize.rollout import FALL_HEIGHT_DROP, FALL_TILT_COS
-from pipeline.distance.field import boxes_query_links
+from pipeline.distance.field import boxes_query_links, cylinders_query_links
 from pipeline.errors import InputError
 from pipeline.robot import NQ_ROBOT, NUM_JOINTS, NV_ROBOT
 from pipeline.scene import build_spec
@@ -80,9 +80,9 @@ class Worlds:
         self.command = stack(lambda e: command_frames(e.simulated.frames, e.simulated.robot.fps, horizon_s))
         self.torso_up = stack(lambda e: _torso_up(e.simulated))
         self.episode = torch.zeros(envs, dtype=torch.long, device=device)
-        self.shapes = Shapes(episodes, self.device)
-        self.half = torch.ones(envs, self.shapes.parts, 3, device=device)
-        self.centre = torch.zeros(envs, self.shapes.parts, 3, device=device)
+        self.shapes = Shapes(episodes, self.device, randomization.cylinder_prob)
+        self.parts = self.shapes.at(torch.zeros(envs, dtype=torch.long, device=device),
+                                    torch.ones(envs, 3, device=device), torch.zeros(envs, device=device))  # fmt: skip
         self.dz = torch.zeros(envs, device=device)
         self.command_offset = torch.zeros(envs, 3, device=device)
         self.joint_range = build_spec((), episodes[0].profile).compile().jnt_range[1 : 1 + NUM_JOINTS]
@@ -101,8 +101,7 @@ class Worlds:
         return e, torch.minimum(env.episode_length_buf, self.frames[e] - 1)
 
     def draw(self, n: int) -> tuple[torch.Tensor, dict]:
-        """``n`` starts on the device: episode indices and :func:`train.randomize.draw_batch`'s draws (the box stays
-        a box: its ``cylinder`` draw is ignored)."""
+        """``n`` starts on the device: episode indices and :func:`train.randomize.draw_batch`'s draws."""
         episode = torch.randint(len(self.episodes), (n,), generator=self.torch_rng, device=self.device)
         return episode, draw_batch(self.randomization, n, self.torch_rng)
 
@@ -126,12 +125,14 @@ class Worlds:
         qpos = torch.cat([self.qpos[e, 0], start], 1)
         qpos = perturbed_initial_state(qpos, self.joint_range, [NQ_ROBOT], *(v[k] for k in INITIAL_STATE))
         self.episode[ids], self.dz[ids] = e, dz
-        self.half[ids], self.centre[ids], _ = self.shapes.at(e, v["scale"])
+        parts = self.shapes.at(e, v["scale"], v["cylinder"])
+        for mine, new in zip(self.parts, parts):
+            mine[ids] = new
         self.command_offset[ids] = v["command_offset"]
         d = env.sim.data
         d.qpos[ids] = qpos
         d.qvel[ids] = torch.cat([self.qvel[e, 0], torch.zeros(len(e), 6, device=self.device)], 1)
-        write_object(env, ids, self.shapes, e, v)
+        write_object(env, ids, self.shapes, parts, v, e)
 
 
 def _torso_up(sim) -> np.ndarray:
@@ -195,13 +196,16 @@ def root_command(env: ManagerBasedRlEnv, worlds: Worlds) -> torch.Tensor:
 def interaction(env: ManagerBasedRlEnv, worlds: Worlds, links: tuple[str, ...]) -> torch.Tensor:
     """(N, 10 K) u_t per DF link (:func:`pipeline.terms.interaction.interaction_features`) against the world's
     object, its box parts at their half-extents and centres (:func:`pipeline.distance.field.boxes_query_links`, as
-    the CPU environment queries boxes and chairs)."""
+    the CPU environment queries boxes and chairs) or its cylinder
+    (:func:`pipeline.distance.field.cylinders_query_links`)."""
     d, ids = env.sim.data, worlds.bodies(env, links)
     pos = d.xpos[:, ids]
     vel = link_velocity(pos, d.cvel[:, ids], d.subtree_com[:, env.scene["robot"].indexing.root_body_id][:, None])
-    pose = d.qpos[:, NQ_ROBOT : NQ_ROBOT + 7]
-    parts = (worlds.half[:, 0],) if worlds.shapes.parts == 1 else (worlds.half, worlds.centre)
-    phi, grad = boxes_query_links(pos, pose, *parts)
+    pose, p = d.qpos[:, NQ_ROBOT : NQ_ROBOT + 7], worlds.parts
+    phi, grad = boxes_query_links(pos, pose, *((p.half[:, 0],) if worlds.shapes.parts == 1 else (p.half, p.centre)))
+    if worlds.shapes.cylinders:
+        phi_c, grad_c = cylinders_query_links(pos, pose, p.radius, p.length)
+        phi, grad = torch.where(p.cylinder[:, None], phi_c, phi), torch.where(p.cylinder[:, None, None], grad_c, grad)
     return interaction_features(phi, grad, vel).reshape(len(pos), -1)
 
 

@@ -4,7 +4,8 @@ in :class:`RandomizationConfig` are ours, each small against what the BC + DAgge
 range of 0 (or a factor range of (1, 1)) switches one off:
 
 1. **object geometry**: a per-axis scale (the ``scale`` of the episode draw, 0.4-1.6 as the evaluation's), a box
-   drawn as a cylinder of the same height and mean half-width with ``cylinder_prob`` (primitive boxes only);
+   drawn as a circular cylinder of the same height and mean half-width with ``cylinder_prob`` (primitive boxes
+   only);
 2. **physical properties**: the object's mass and friction times a factor, a restitution coefficient
    (:func:`object_physics`; the scene builder turns restitution into a contact spring);
 3. **initial conditions**: the robot's root and the objects shifted in x, y and turned about z, the joints moved
@@ -116,13 +117,15 @@ def stack(variations: list[Variation]) -> dict[str, np.ndarray]:
 
 
 def vary_shape(o: ObjectTrack, v: Variation) -> ObjectTrack:
-    """A primitive box drawn as a cylinder (z axis, radius the mean of the box's x and y half-extents, the same
-    half-height and scale) when ``v.cylinder``; any other object as it is."""
+    """A primitive box drawn as a circular cylinder along z when ``v.cylinder``: radius the mean of the box's x and y
+    half-extents, the same half-height (both at the box's scale); any other object as it is. Circular so that it is
+    MuJoCo's cylinder primitive on both backends: a cylinder scaled per axis is a collision mesh, which an mjlab
+    world cannot switch to at a restart (:mod:`train.mjlab_object`)."""
     g = o.geometry
     if not (v.cylinder and isinstance(g, Primitive) and g.kind == "box"):
         return o
-    hx, hy, hz = g.size
-    return replace(o, geometry=Primitive("cylinder", ((hx + hy) / 2, hz), g.scale))
+    hx, hy, hz = (float(h) for h in g.half_extents)
+    return replace(o, geometry=Primitive("cylinder", ((hx + hy) / 2, hz)))
 
 
 def object_physics(o: ObjectTrack, v: Variation) -> ObjectPhysics:

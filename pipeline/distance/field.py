@@ -227,10 +227,7 @@ def boxes_query_links(points, poses, half, centre=None) -> tuple[Any, Any]:
     from pipeline.distance.primitive import box_local, box_phi
 
     xp = namespace(points)
-    t = [poses[:, None, i] for i in range(3)]
-    R = rotation_rows(poses[:, None, 3:7], xp)
-    X, Y, Z = points[..., 0] - t[0], points[..., 1] - t[1], points[..., 2] - t[2]
-    local = [R[0][j] * X + R[1][j] * Y + R[2][j] * Z for j in range(3)]
+    local, R = _object_frame(points, poses, xp)
     if half.ndim == 2:
         phi, g, _ = box_local(*local, half[:, None, 0], half[:, None, 1], half[:, None, 2], xp)
     else:
@@ -247,5 +244,29 @@ def boxes_query_links(points, poses, half, centre=None) -> tuple[Any, Any]:
         rows = xp.arange(len(table))[:, None] if xp is np else xp.arange(len(table), device=table.device)[:, None]
         h, c = table[rows, part, :3], table[rows, part, 3:]
         phi, g, _ = box_local(*(local[i] - c[..., i] for i in range(3)), *(h[..., i] for i in range(3)), xp)
-    grad = xp.stack([R[i][0] * g[0] + R[i][1] * g[1] + R[i][2] * g[2] for i in range(3)], -1)
-    return phi, grad
+    return phi, _world_vectors(g, R, xp)
+
+
+def cylinders_query_links(points, poses, radius, half_length) -> tuple[Any, Any]:
+    """:func:`boxes_query_links` for N circular cylinders along their z, each of its own ``radius`` and
+    ``half_length`` (N,) (:func:`pipeline.distance.primitive.cylinder_local`); numpy or torch alike."""
+    from pipeline.distance.primitive import cylinder_local
+
+    xp = namespace(points)
+    local, R = _object_frame(points, poses, xp)
+    phi, g, _ = cylinder_local(*local, radius[:, None], half_length[:, None], xp)
+    return phi, _world_vectors(g, R, xp)
+
+
+def _object_frame(points, poses, xp) -> tuple[list, tuple]:
+    """N objects' K points (N, K, 3) in their frames (poses (N, 7)), as three (N, K) coordinates, and the rows of
+    each object's rotation (:meth:`ObjectField._chunk`'s transform)."""
+    t = [poses[:, None, i] for i in range(3)]
+    R = rotation_rows(poses[:, None, 3:7], xp)
+    X, Y, Z = points[..., 0] - t[0], points[..., 1] - t[1], points[..., 2] - t[2]
+    return [R[0][j] * X + R[1][j] * Y + R[2][j] * Z for j in range(3)], R
+
+
+def _world_vectors(g, R, xp):
+    """Object-frame vectors ``g`` (three (N, K) components) turned to the world, (N, K, 3)."""
+    return xp.stack([R[i][0] * g[0] + R[i][1] * g[1] + R[i][2] * g[2] for i in range(3)], -1)

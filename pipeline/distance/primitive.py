@@ -64,15 +64,49 @@ class _Section:
     def closest(self, x, y, xp):
         """(qx, qy, nx, ny, inside): closest boundary point, outward normal there, strictly inside."""
         if _isotropic(self.radii):
-            r = self.radii[0]
-            rho = xp.sqrt(x * x + y * y)
-            safe = xp.where(rho > 0, rho, 1.0)
-            ux, uy = xp.where(rho > 0, x / safe, 1.0), y / safe
-            return r * ux, r * uy, ux, uy, rho < r
+            return _circle_closest(x, y, self.radii[0], xp)
         e = Ellipsoid(self.radii)
         qx, qy = e.closest([x, y], xp)
         nx, ny = e.normal([qx, qy], xp)
         return qx, qy, nx, ny, e.inside([x, y])
+
+
+def _circle_closest(x, y, r, xp):
+    """:meth:`_Section.closest` for a circle of radius ``r`` (a scalar, or an array broadcasting with ``x``)."""
+    rho = xp.sqrt(x * x + y * y)
+    safe = xp.where(rho > 0, rho, 1.0)
+    ux, uy = xp.where(rho > 0, x / safe, 1.0), y / safe
+    return r * ux, r * uy, ux, uy, rho < r
+
+
+def cylinder_local(x, y, z, r, h, xp):
+    """``(phi, grad, closest)`` of circular cylinders along z, radius ``r`` and half-length ``h`` (scalars, or arrays
+    broadcasting with ``x``: a batch of cylinders of their own sizes), at points in their frames; numpy or torch
+    (:meth:`CylinderShape.local_xp`'s circular case; the mjlab backend's batch of drawn cylinders)."""
+    return _cylinder_field(x, y, z, _circle_closest(x, y, r, xp), h, xp)
+
+
+def _cylinder_field(x, y, z, section, h, xp):
+    """The field of a cylinder along z of half-length ``h`` given its section's :meth:`_Section.closest`."""
+    qx, qy, nx, ny, in_sec = section
+    cx, cy, cz = xp.where(in_sec, x, qx), xp.where(in_sec, y, qy), xp.clip(z, -h, h)
+    dx, dy, dz = x - cx, y - cy, z - cz
+    out = _norm3(dx, dy, dz, xp)
+    solid = out <= EPS
+    side = xp.sqrt((x - qx) ** 2 + (y - qy) ** 2)
+    cap = h - abs(z)
+    use_side = solid & (side <= cap)
+    use_cap = solid & ~use_side
+    inv = 1.0 / xp.where(solid, 1.0, out)
+    sz = _sign(z)
+    g = (
+        xp.where(use_side, nx, xp.where(use_cap, 0.0, dx * inv)),
+        xp.where(use_side, ny, xp.where(use_cap, 0.0, dy * inv)),
+        xp.where(use_side, 0.0, xp.where(use_cap, sz, dz * inv)),
+    )
+    c = (xp.where(use_side, qx, cx), xp.where(use_side, qy, cy), xp.where(use_cap, sz * h, cz))
+    phi = xp.where(use_side, side, xp.where(use_cap, abs(cap), out))
+    return phi, g, c
 
 
 def box_local(x, y, z, hx, hy, hz, xp):
@@ -185,26 +219,7 @@ class CylinderShape:
 
     def local_xp(self, x, y, z, xp):
         """The field in numpy/torch (a circular section, or where warp cannot run; the kernel's reference)."""
-        h = self.half_length
-        qx, qy, nx, ny, in_sec = _Section(self.radii).closest(x, y, xp)
-        cx, cy, cz = xp.where(in_sec, x, qx), xp.where(in_sec, y, qy), xp.clip(z, -h, h)
-        dx, dy, dz = x - cx, y - cy, z - cz
-        out = _norm3(dx, dy, dz, xp)
-        solid = out <= EPS
-        side = xp.sqrt((x - qx) ** 2 + (y - qy) ** 2)
-        cap = h - abs(z)
-        use_side = solid & (side <= cap)
-        use_cap = solid & ~use_side
-        inv = 1.0 / xp.where(solid, 1.0, out)
-        sz = _sign(z)
-        g = (
-            xp.where(use_side, nx, xp.where(use_cap, 0.0, dx * inv)),
-            xp.where(use_side, ny, xp.where(use_cap, 0.0, dy * inv)),
-            xp.where(use_side, 0.0, xp.where(use_cap, sz, dz * inv)),
-        )
-        c = (xp.where(use_side, qx, cx), xp.where(use_side, qy, cy), xp.where(use_cap, sz * h, cz))
-        phi = xp.where(use_side, side, xp.where(use_cap, abs(cap), out))
-        return phi, g, c
+        return _cylinder_field(x, y, z, _Section(self.radii).closest(x, y, xp), self.half_length, xp)
 
 
 @dataclass(frozen=True)
