@@ -114,6 +114,8 @@ def _check_object_fields(env, cpu) -> None:
         gi = g[-1:] if m0.geom_type[g0[0]] == mujoco.mjtGeom.mjGEOM_CYLINDER else g[:k]  # the cylinder slot is last
         pairs = [("geom_size", mine["geom_size"][i, gi], m0.geom_size[g0]),
                  ("geom_pos", mine["geom_pos"][i, gi], m0.geom_pos[g0]),
+                 ("geom_rbound", mine["geom_rbound"][i, gi], m0.geom_rbound[g0]),
+                 ("geom_aabb", mine["geom_aabb"][i, gi].reshape(len(gi), 6), m0.geom_aabb[g0]),
                  ("geom_friction", mine["geom_friction"][i, gi], m0.geom_friction[g0]),
                  ("geom_solref", mine["geom_solref"][i, gi], m0.geom_solref[g0]),
                  ("geom_solimp", mine["geom_solimp"][i, gi], m0.geom_solimp[g0]),

@@ -109,11 +109,12 @@ class Shapes:
 
 def slots(p: Parts, cylinders: bool) -> dict:
     """Every geom slot of the object (the box parts, then the cylinder slot if any): MuJoCo's ``size`` and ``pos``,
-    the bounding ``rbound`` and ``aabb`` half-sizes, and each slot's ``volume`` and ``unit`` inertia (its principal
-    moments per unit mass about its centre), 0 for the slots a world does not use."""
+    its bounding sphere's radius ``rbound`` and box's half-sizes ``aabb``, and each slot's ``volume`` and ``unit``
+    inertia (its principal moments per unit mass about its centre), 0 for the slots a world does not use."""
     box_volume = 8 * p.half.prod(-1) * p.real
     box_unit = (p.half.square().sum(-1, keepdim=True) - p.half.square()) / 3
-    out = {"size": p.half, "pos": p.centre, "aabb": p.half, "volume": box_volume, "unit": box_unit}
+    out = {"size": p.half, "pos": p.centre, "aabb": p.half, "rbound": p.half.norm(dim=-1), "volume": box_volume,
+           "unit": box_unit}  # fmt: skip
     if not cylinders:
         return out
     r = torch.where(p.cylinder, p.radius, PAD_HALF)
@@ -124,6 +125,7 @@ def slots(p: Parts, cylinders: bool) -> dict:
         "size": torch.stack([r, h, 0 * r], 1),
         "pos": at,
         "aabb": torch.stack([r, r, h], 1),
+        "rbound": torch.hypot(r, h),
         "volume": 2 * torch.pi * r.square() * h * p.cylinder,
         "unit": torch.stack([side, side, r.square() / 2], 1),
     }
@@ -194,7 +196,7 @@ def write_object(env, ids: torch.Tensor, shapes: Shapes, parts: Parts, draws: di
     mass = shapes.mass[episode] * draws["mass_factor"]
     rows, cols = ids[:, None], g[None]
     m.geom_size[rows, cols], m.geom_pos[rows, cols] = geoms["size"], geoms["pos"]
-    m.geom_rbound[rows, cols] = geoms["aabb"].norm(dim=-1)
+    m.geom_rbound[rows, cols] = geoms["rbound"]
     m.geom_aabb[rows, cols] = torch.stack([torch.zeros_like(geoms["aabb"]), geoms["aabb"]], 2)  # (centre, half)
     m.geom_friction[rows, cols, 0] = (shapes.friction[episode] * draws["friction_factor"])[:, None]
     e_rest = draws["restitution"]
