@@ -133,6 +133,34 @@ def _check_object_fields(env, cpu) -> None:
         assert (mine["geom_size"][i, pads] <= 1e-4).all()  # the slots this world does not use (train.mjlab_object)
 
 
+def test_a_restart_sizes_each_world_by_its_episode_and_draw(bc_corpus):
+    """:meth:`train.mjlab_object.Shapes.at` (no mjlab; here for the corpus this file builds): a chair world takes
+    :meth:`Chair.scaled`'s parts; a box world its box and five pads at its centre; a box drawn as a cylinder the
+    box's mean scaled half-width and half-height, every box part a pad; a chair's cylinder draw is ignored.
+    :meth:`Shapes.floor_shift` raises a box (and its cylinder) by its half-height's change, never a chair."""
+    from pipeline.geometry import Chair
+    from train.mjlab_object import PAD_HALF, Shapes
+
+    episodes = bc_corpus[0]
+    box, chair = (next(i for i, e in enumerate(episodes) if (e.task == "SitStand") == c) for c in (False, True))
+    shapes = Shapes(episodes, torch.device("cpu"), cylinder_prob=0.5)
+    assert shapes.parts == 6 and shapes.cylinders
+    scale = torch.tensor([[0.5, 1.2, 1.5]] * 3)
+    episode = torch.tensor([chair, box, box])
+    p = shapes.at(episode, scale, torch.tensor([1.0, 0.0, 1.0]))
+    parts = Chair(**episodes[chair].simulated.robot.objects[0].geometry.__dict__).scaled(scale[0].numpy()).parts()
+    np.testing.assert_allclose(p.half[0].numpy(), [b.half_extents for _, b, _ in parts], rtol=1e-6)
+    np.testing.assert_allclose(p.centre[0].numpy(), [c for _, _, c in parts], rtol=1e-6, atol=1e-7)
+    half = episodes[box].simulated.robot.objects[0].geometry.half_extents * scale[1].numpy()
+    np.testing.assert_allclose(p.half[1, 0].numpy(), half, rtol=1e-6)
+    assert (p.half[1, 1:] == PAD_HALF).all() and (p.centre[1:] == 0).all() and (p.half[2] == PAD_HALF).all()
+    assert p.real[0].all() and p.real[1].tolist() == [True] + [False] * 5 and not p.real[2].any()
+    assert p.cylinder.tolist() == [False, False, True]
+    assert float(p.radius[2]) == pytest.approx((half[0] + half[1]) / 2) and float(p.length[2]) == pytest.approx(half[2])
+    shift = shapes.floor_shift(episode, scale).numpy()
+    assert shift[0] == 0 and shift[1] == shift[2] == pytest.approx(half[2] - half[2] / 1.5)
+
+
 def test_a_step_restarts_and_hands_rsl_rl_what_the_cpu_environment_does(mjlab_env):
     """``policy`` is 3-step windows in flatten_windows' layout (a start fills its window), ``critic`` the current
     step; the style extras are the DF features and the AMP transition; a finished episode restarts."""

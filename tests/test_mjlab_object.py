@@ -1,5 +1,5 @@
 """The mjlab worlds' objects (:mod:`train.mjlab_object`) against what MuJoCo's compiler derives for the same object
-in the native scene: a box and chairs at drawn per-axis scales (torch on the CPU; no mjlab needed)."""
+in the native scene: a box, a cylinder and chairs at drawn per-axis scales (torch on the CPU; no mjlab needed)."""
 
 import mujoco
 import numpy as np
