@@ -188,7 +188,8 @@ def _box_parts(objects) -> tuple[np.ndarray, np.ndarray] | None:
     if isinstance(g, Primitive) and g.kind == "box":
         return np.asarray(g.half_extents, dtype=float)[None], np.zeros((1, 3))
     if isinstance(g, Chair):
-        return np.array([p.half_extents for _, p, _ in g.parts()]), np.array([c for _, _, c in g.parts()])
+        parts = g.parts()
+        return np.array([p.half_extents for _, p, _ in parts]), np.array([c for _, _, c in parts])
     return None
 
 

@@ -224,7 +224,8 @@ def root_tracking(env: ManagerBasedRlEnv, worlds: Worlds) -> torch.Tensor:
 
 def object_tracking(env: ManagerBasedRlEnv, worlds: Worlds, sigma: float) -> torch.Tensor:
     e, k = worlds.index(env)
-    target = worlds.object[e, k, :3] + torch.stack([0 * worlds.dz, 0 * worlds.dz, worlds.dz], 1)
+    target = worlds.object[e, k, :3].clone()
+    target[:, 2] += worlds.dz  # the track raised as the first pose (Worlds.start)
     return R.object_tracking(env.sim.data.qpos[:, NQ_ROBOT : NQ_ROBOT + 3], target, sigma)
 
 

@@ -24,7 +24,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from pipeline.distance.array_ns import as_float, concat, namespace, to_numpy
+from pipeline.distance.array_ns import as_float, namespace, to_numpy
 from pipeline.distance.primitive import chair_shape, primitive_shape
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.geometry import Chair, MeshGeometry, ObjectGeometry, Primitive, geometry_from_dict
@@ -224,25 +224,18 @@ def boxes_query_links(points, poses, half, centre=None) -> tuple[Any, Any]:
     first on ties), as :class:`pipeline.distance.primitive.ChairShape`. The pose transform is
     :meth:`ObjectField._chunk`'s, the field :func:`pipeline.distance.primitive.box_local`; numpy or torch alike (the
     CPU environment and the mjlab backend share it)."""
-    from pipeline.distance.primitive import box_local, box_phi
+    from pipeline.distance.primitive import box_local, nearest_box
 
     xp = namespace(points)
     local, R = _object_frame(points, poses, xp)
     if half.ndim == 2:
         phi, g, _ = box_local(*local, half[:, None, 0], half[:, None, 1], half[:, None, 2], xp)
     else:
-        table = concat([half, centre], xp, axis=2)  # (N, P, 6): half-extents, then centre
-        best = part = None
-        for k in range(half.shape[1]):
-            h, c = table[:, None, k, :3], table[:, None, k, 3:]
-            phi_k = box_phi(*(local[i] - c[..., i] for i in range(3)), *(h[..., i] for i in range(3)), xp)
-            if best is None:
-                best, part = phi_k, 0 * (phi_k > 0)
-                continue
-            near = phi_k < best
-            best, part = xp.where(near, phi_k, best), xp.where(near, k, part)
-        rows = xp.arange(len(table))[:, None] if xp is np else xp.arange(len(table), device=table.device)[:, None]
-        h, c = table[rows, part, :3], table[rows, part, 3:]
+        parts = [([half[:, None, k, i] for i in range(3)], [centre[:, None, k, i] for i in range(3)])
+                 for k in range(half.shape[1])]  # fmt: skip
+        part = nearest_box(*local, parts, xp)
+        rows = xp.arange(len(half))[:, None] if xp is np else xp.arange(len(half), device=half.device)[:, None]
+        h, c = half[rows, part], centre[rows, part]
         phi, g, _ = box_local(*(local[i] - c[..., i] for i in range(3)), *(h[..., i] for i in range(3)), xp)
     return phi, _world_vectors(g, R, xp)
 

@@ -131,6 +131,20 @@ def box_local(x, y, z, hx, hy, hz, xp):
     return xp.where(solid, depth, out), g, c
 
 
+def nearest_box(x, y, z, boxes, xp):
+    """Index of the nearest of ``boxes`` at each point (the first on ties): ``(half-extents, centre)`` per box, each
+    three components that are floats or arrays broadcasting with ``x`` (one union, or a batch of unions)."""
+    best = part = None
+    for k, (h, c) in enumerate(boxes):
+        phi = box_phi(x - c[0], y - c[1], z - c[2], h[0], h[1], h[2], xp)
+        if best is None:
+            best, part = phi, 0 * (phi > 0)
+            continue
+        near = phi < best
+        best, part = xp.where(near, phi, best), xp.where(near, k, part)
+    return part
+
+
 def box_phi(x, y, z, hx, hy, hz, xp):
     """phi only: |outside distance| or inside depth."""
     qx, qy, qz = abs(x) - hx, abs(y) - hy, abs(z) - hz
@@ -315,14 +329,7 @@ class ChairShape:
     parts: tuple[tuple[BoxShape, tuple[float, float, float]], ...]
 
     def local(self, x, y, z, xp):
-        best = part = None
-        for k, (box, (ox, oy, oz)) in enumerate(self.parts):
-            phi = box_phi(x - ox, y - oy, z - oz, *box.half, xp)
-            if best is None:
-                best, part = phi, 0 * (phi > 0)
-                continue
-            near = phi < best
-            best, part = xp.where(near, phi, best), xp.where(near, k, part)
+        part = nearest_box(x, y, z, [(box.half, o) for box, o in self.parts], xp)
         table = np.array([[*box.half, *o] for box, o in self.parts])
         if not isinstance(x, np.ndarray):
             table = xp.as_tensor(table, dtype=x.dtype, device=x.device)
