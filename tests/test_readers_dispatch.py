@@ -1,12 +1,17 @@
 """read_clips / read_robot_clip: dispatch by suffix and npz keys, folders, skipped files."""
 
 import shutil
+import struct
+import zipfile
 
 import numpy as np
 import pytest
 from mocap_paths import SHARED_MOCAP, expect_input_error, needs_shared
 
-from pipeline.readers import npz_kind, read_clips, read_robot_clip
+from pipeline.readers import npz_kind, read_clips, read_robot_clip, read_robot_clips
+from pipeline.readers.amass import read_amass
+from pipeline.readers.keypoints import read_keypoints_npz
+from pipeline.readers.peers import read_beyondmimic_npz
 from pipeline.robot import G1_JOINT_NAMES
 
 BVH = """HIERARCHY
@@ -96,6 +101,57 @@ def test_npz_kinds_and_robot_dispatch(tmp_path):
     b = tmp_path / "walk.bvh"
     b.write_text(BVH)
     expect_input_error(lambda: read_robot_clip(b), tmp_path, file=b, field="suffix", match="expected .npz or .pkl")
+
+
+def _npy(header: bytes, data: bytes) -> bytes:
+    """A ``.npy`` member by hand: magic, version 1.0, header length, header padded to 128 bytes, data."""
+    header = header.ljust(117) + b"\n"
+    return b"\x93NUMPY\x01\x00" + struct.pack("<H", len(header)) + header + data
+
+
+def _damaged(tmp_path, how):
+    """A ``.npz`` that numpy cannot read: empty, one ``.npy`` array, truncated, a garbled ``.npy`` header, a member
+    shorter than its header says, or damaged deflated data."""
+    p = tmp_path / f"{how}.npz"
+    if how == "empty":
+        p.write_bytes(b"")
+    elif how == "npy":  # one array saved with np.save, named .npz
+        with open(p, "wb") as f:
+            np.save(f, np.zeros((3, 2, 3)))
+    elif how == "truncated":
+        _keypoints(p, T=50)
+        p.write_bytes(p.read_bytes()[: p.stat().st_size // 2])
+    elif how in ("header", "short"):  # a well-formed zip (right CRCs) whose joint_pos.npy numpy cannot parse
+        header = b"{'descr': '<f8', 'fortran_order': False, 'shape': (3, 2, 3), }" if how == "short" else b"((((("
+        with zipfile.ZipFile(p, "w") as z:
+            z.writestr("joint_pos.npy", _npy(header, bytes(8)))  # 8 of the 144 data bytes
+            z.writestr("fps.npy", _npy(b"{'descr': '<f8', 'fortran_order': False, 'shape': (), }", bytes(8)))
+    else:  # deflated: the compressed joint_pos data zeroed
+        np.savez_compressed(p, joint_pos=np.random.default_rng(0).random((50, 2, 3)), joint_names=["a", "b"], fps=10)
+        raw = bytearray(p.read_bytes())
+        start = raw.index(b"joint_pos.npy") + len("joint_pos.npy") + 20
+        raw[start : start + 40] = bytes(40)
+        p.write_bytes(bytes(raw))
+    return p
+
+
+@pytest.mark.parametrize("how", ["empty", "npy", "truncated", "header", "short", "deflated"])
+def test_unreadable_npz_is_a_one_line_error(tmp_path, how):
+    """``make retarget INPUT=x.npz`` (read_clips) and every npz reader: an empty, truncated or corrupt file is a
+    one-line InputError naming it, never numpy's EOFError / BadZipFile traceback."""
+    p = _damaged(tmp_path, how)
+    match = {"empty": "is empty", "npy": "not an npz archive"}.get(how, "not a readable npz")
+    for call in (
+        lambda: read_clips(p),
+        lambda: read_clips(tmp_path),  # inside a folder too: a damaged clip is an error, not skipped
+        lambda: npz_kind(p),
+        lambda: read_robot_clip(p),
+        lambda: read_robot_clips(tmp_path),
+        lambda: read_keypoints_npz(p, fps=30),
+        lambda: read_amass(p, body_model=tmp_path),
+        lambda: read_beyondmimic_npz(p),
+    ):
+        expect_input_error(call, tmp_path, file=p, field="file", match=match)
 
 
 @needs_shared

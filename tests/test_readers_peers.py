@@ -1,14 +1,17 @@
-"""Peers' G1 outputs: the OmniRetarget (BeyondMimic-format) npz and GMR pickles."""
+"""Peers' G1 outputs: the OmniRetarget (BeyondMimic-format) npz, GMR pickles and HDMI motion folders."""
 
+import json
 import pickle
 
+import mujoco
 import numpy as np
 import pytest
 from mocap_paths import SHARED_MOCAP, expect_input_error, needs_shared
 
 from pipeline.geometry import MeshGeometry
-from pipeline.readers.peers import read_beyondmimic_npz, read_gmr_pkl
-from pipeline.robot import G1_JOINT_NAMES
+from pipeline.readers import read_robot_clips
+from pipeline.readers.peers import read_beyondmimic_npz, read_gmr_pkl, read_hdmi_motion
+from pipeline.robot import G1_JOINT_NAMES, actuator_profile, g1_model
 from pipeline.rotations import xyzw_to_wxyz
 
 OMNI = SHARED_MOCAP / "omniretarget" / "sub3_largebox_003_mj_w_obj.npz"
@@ -155,3 +158,71 @@ def test_bad_gmr_files(tmp_path):
     e = _pkl(tmp_path, {"fps": 30, "x": _Evil(str(target))}, "evil.pkl")
     expect_input_error(lambda: read_gmr_pkl(e), tmp_path, file=e, field="file", match=r"refusing to load io\.open")
     assert not target.exists()
+
+
+HDMI_WRISTS = [j for j in G1_JOINT_NAMES if "wrist_pitch" in j or "wrist_yaw" in j]  # HDMI's G1 has 25 joints
+
+
+def _hdmi_walk(folder, first="root", T=4, placeholder=7.5):
+    """An HDMI LAFAN1-walk-like folder: ``joint_names`` = ``first`` + the 25 joints, ``joint_pos`` [T, 26] whose first
+    column is ``placeholder`` (not a joint), bodies by forward kinematics of a known qpos (no object). Returns it."""
+    rng = np.random.default_rng(0)
+    joints = [j for j in G1_JOINT_NAMES if j not in HDMI_WRISTS]
+    qpos = np.zeros((T, 36))
+    qpos[:, :3] = [0.3, -0.2, 0.78] + 0.01 * np.arange(T)[:, None]
+    yaw = 0.1 * np.arange(T)
+    qpos[:, 3], qpos[:, 6] = np.cos(yaw / 2), np.sin(yaw / 2)
+    qpos[:, 7:] = actuator_profile("mjlab").default_joint_pos + 0.05 * rng.standard_normal((T, 29))
+    for j in HDMI_WRISTS:  # HDMI has no such joints: the reader holds them at the default pose
+        qpos[:, 7 + G1_JOINT_NAMES.index(j)] = actuator_profile("mjlab").default_joint_pos[G1_JOINT_NAMES.index(j)]
+    m, d = g1_model(), mujoco.MjData(g1_model())
+    bodies = [m.body(i).name for i in range(1, m.nbody)]
+    pos, quat = np.zeros((T, len(bodies), 3)), np.zeros((T, len(bodies), 4))
+    for t, q in enumerate(qpos):
+        d.qpos[:] = q
+        mujoco.mj_kinematics(m, d)
+        pos[t], quat[t] = d.xpos[1:], d.xquat[1:]
+    jp = np.concatenate([np.full((T, 1), placeholder), qpos[:, 7:][:, [G1_JOINT_NAMES.index(j) for j in joints]]], 1)
+    folder.mkdir(parents=True)
+    np.savez(folder / "motion.npz", joint_pos=jp, body_pos_w=pos, body_quat_w=quat)
+    (folder / "meta.json").write_text(json.dumps({"fps": 30, "joint_names": [first, *joints], "body_names": bodies}))
+    return qpos
+
+
+def test_hdmi_root_placeholder_column_is_dropped(tmp_path):
+    """HDMI's LAFAN1 walks name the free joint ``root`` in joint_names, with a joint_pos column: it is dropped, the
+    25 joints land in mjlab order, the wrists are held, and the root is the pelvis body."""
+    folder = tmp_path / "walk1_subject1"
+    qpos = _hdmi_walk(folder)
+    (clip,) = read_robot_clips(folder)  # what `make import INPUT=walk1_subject1` reads
+    assert clip.qpos.shape == (4, 36) and clip.fps == 30 and clip.objects == ()
+    assert clip.provenance["held_joints"] == HDMI_WRISTS
+    np.testing.assert_allclose(clip.qpos[:, 7:], qpos[:, 7:], atol=1e-12)  # the 25 joints, and the held wrists
+    pelvis = [g1_model().body(i).name for i in range(1, g1_model().nbody)].index("pelvis")
+    np.testing.assert_allclose(clip.qpos[:, :3], qpos[:, :3], atol=1e-9)  # the pelvis body, not the 7.5 column
+    np.testing.assert_allclose(np.abs((clip.qpos[:, 3:7] * qpos[:, 3:7]).sum(1)), 1, atol=1e-9)
+    with np.load(folder / "motion.npz") as d:
+        np.testing.assert_allclose(clip.qpos[:, :7], np.concatenate([d["body_pos_w"], d["body_quat_w"]], 2)[:, pelvis])
+    assert np.array_equal(read_hdmi_motion(folder).qpos, clip.qpos)
+
+
+@pytest.mark.parametrize("name", ["Root", "root_joint", "pelvis"])
+def test_hdmi_other_unknown_joint_names_stay_errors(tmp_path, name):
+    folder = tmp_path / "walk"
+    _hdmi_walk(folder, first=name)
+    expect_input_error(
+        lambda: read_robot_clips(folder), tmp_path, file=folder, field="joint_names", match=f"not G1 joints: {name}$"
+    )
+
+
+def test_hdmi_unreadable_motion_npz_is_one_line(tmp_path):
+    folder = tmp_path / "walk"
+    _hdmi_walk(folder)
+    npz = folder / "motion.npz"
+    npz.write_bytes(npz.read_bytes()[:200])  # truncated mid-download
+    expect_input_error(lambda: read_robot_clips(folder), tmp_path, file=npz, field="file", match="not a readable npz")
+    npz.write_bytes(b"")
+    expect_input_error(lambda: read_robot_clips(folder), tmp_path, file=npz, field="file", match="empty")
+    bm = tmp_path / "bm.npz"
+    bm.write_bytes(b"")
+    expect_input_error(lambda: read_beyondmimic_npz(bm), tmp_path, file=bm, field="file", match="empty")

@@ -20,7 +20,9 @@ folders) are read by :func:`read_robot_clip` / :func:`read_robot_clips` (:mod:`p
 A folder yields every clip inside it and in its direct sub-folders, sorted by relative path.
 Files that are not human clips are skipped there: other suffixes (meshes, ``height_dict.pkl``),
 peers' robot ``.npz``, ``.npz`` files with none of the keys above, and ``.mcap`` files without a
-transform stream (e.g. inspection logs). Any other problem in a clip is an error, as for a file.
+transform stream (e.g. inspection logs). Any other problem in a clip is an error, as for a file; an empty,
+truncated or corrupt ``.npz`` is a one-line :class:`~pipeline.errors.InputError` naming it
+(:func:`~pipeline.readers.keypoints.open_npz`, through which every ``.npz`` reader opens its file).
 
 ``fps`` is a fallback rate for files that carry none (CSV without a ``time`` column, keypoint
 ``.npz`` without ``fps``) and the sampling rate of MCAP streams; files with their own rate keep it.
@@ -31,11 +33,10 @@ from __future__ import annotations
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 from pipeline.clip import HumanClip, RobotClip
 from pipeline.errors import InputError
 from pipeline.geometry import ObjectGeometry
+from pipeline.readers.keypoints import open_npz
 
 HUMAN_SUFFIXES = (".bvh", ".pt", ".npz", ".c3d", ".mcap", ".csv")
 ROBOT_SUFFIXES = (".npz", ".pkl")
@@ -47,17 +48,14 @@ class _NotHuman(InputError):
 
 def npz_kind(path: str | Path) -> str | None:
     """``"amass"``, ``"keypoints"``, ``"robot"`` or ``None`` from an ``.npz``'s keys."""
-    try:
-        with np.load(path, allow_pickle=False) as d:
-            keys = set(d.files)
-            if "poses" in keys:
-                return "amass"
-            if "positions" in keys:
-                return "keypoints"
-            if "joint_pos" in keys:
-                return "keypoints" if d["joint_pos"].ndim == 3 else "robot"
-    except (OSError, ValueError) as e:
-        raise InputError(path, "file", f"not a readable npz ({e})") from None
+    with open_npz(path) as d:  # an empty or corrupt file: a one-line InputError
+        keys = set(d.files)
+        if "poses" in keys:
+            return "amass"
+        if "positions" in keys:
+            return "keypoints"
+        if "joint_pos" in keys:
+            return "keypoints" if d["joint_pos"].ndim == 3 else "robot"
     return None
 
 

@@ -25,6 +25,12 @@ from __future__ import annotations
 
 import csv
 import pickle
+import struct
+import tokenize
+import zipfile
+import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -178,19 +184,57 @@ def keypoints_clip(
     return HumanClip(skeleton, pos, fps, source, subject_height=height)
 
 
-def load_npz(path: str | Path) -> tuple[dict[str, np.ndarray], list[str]]:
-    """All plain arrays of an ``.npz`` (no pickles), and the names of pickled members left out."""
+# What numpy.load / NpzFile raise on an unreadable archive: empty or truncated (EOFError, BadZipFile), a damaged
+# member (zlib.error, a CRC BadZipFile, a garbled .npy header: ValueError, SyntaxError, TokenError, struct.error),
+# an encrypted or unsupported member (RuntimeError, NotImplementedError), or no such file (OSError).
+_NPZ_ERRORS = (
+    OSError,
+    ValueError,
+    EOFError,
+    SyntaxError,
+    RuntimeError,
+    zipfile.BadZipFile,
+    zlib.error,
+    struct.error,
+    tokenize.TokenError,
+)
+
+
+@contextmanager
+def open_npz(path: str | Path) -> Iterator[np.lib.npyio.NpzFile]:
+    """``np.load(path, allow_pickle=False)`` as a context manager; an empty, truncated or corrupt ``.npz`` (also one
+    whose member breaks while read inside the ``with`` block) is a one-line :class:`InputError` naming the file.
+
+    Every ``.npz`` reader opens its file through this (or :func:`load_npz`), so none ends in a traceback."""
+    if Path(path).is_file() and Path(path).stat().st_size == 0:
+        raise InputError(path, "file", "is empty (0 bytes), not an npz archive")
     try:
-        with np.load(path, allow_pickle=False) as d:
-            out, skipped = {}, []
-            for k in d.files:
-                try:
-                    out[k] = d[k]
-                except ValueError:  # an object array needs pickle: never loaded
-                    skipped.append(k)
-            return out, skipped
-    except (OSError, ValueError, EOFError) as e:
-        raise InputError(path, "file", f"not a readable npz ({e})") from None
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):  # a lone .npy array renamed .npz
+            raise InputError(path, "file", "holds one .npy array, not an npz archive of named arrays")
+        with loaded as d:
+            yield d
+    except InputError:
+        raise
+    except _NPZ_ERRORS as e:
+        kind = type(e).__name__ if type(e).__module__ == "builtins" else f"{type(e).__module__}.{type(e).__name__}"
+        raise InputError(path, "file", f"not a readable npz ({kind}: {e})") from None
+
+
+def load_npz(path: str | Path) -> tuple[dict[str, np.ndarray], list[str]]:
+    """All plain arrays of an ``.npz`` (no pickles), and the names of pickled members left out.
+
+    An unreadable file is a one-line :class:`InputError` (see :func:`open_npz`)."""
+    with open_npz(path) as d:
+        out, skipped = {}, []
+        for k in d.files:
+            try:
+                out[k] = d[k]
+            except ValueError as e:  # an object array needs pickle: never loaded
+                if "allow_pickle" not in str(e):
+                    raise
+                skipped.append(k)
+        return out, skipped
 
 
 def _npz_str(d: dict, key: str, default: str) -> str:

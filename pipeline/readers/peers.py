@@ -22,9 +22,12 @@ HDMI motion folder (``motion.npz`` + ``meta.json``)
     ``meta.json``: ``fps``, ``joint_names`` (possibly fewer than 29: HDMI's 25-joint G1 has no wrist pitch/yaw),
     ``body_names`` (the robot's links, then any object body, e.g. ``largebox``); ``motion.npz``: ``joint_pos``
     ``[T, J]``, ``body_pos_w`` ``[T, B, 3]``, ``body_quat_w`` ``[T, B, 4]`` ``wxyz``. The root is the ``pelvis``
-    body. Joints the file lacks that carry no weight (the wrists, :data:`HELD_JOINT_KEYS`) are held at the
-    actuator profile's default pose and named in ``provenance["held_joints"]``; a file without a leg, waist or
-    arm joint is an :class:`InputError`. A body that is not a G1 link is the object: its geometry is
+    body. A ``joint_names`` entry named exactly ``root`` (HDMI's LAFAN1 walks: ``joint_pos`` ``[T, 26]``, its first
+    column a placeholder for the free joint) is not a joint: it and its ``joint_pos`` column are dropped (the root
+    still comes from the pelvis body); any other name that is not a G1 joint is an :class:`InputError`. Joints the
+    file lacks that carry no weight (the wrists, :data:`HELD_JOINT_KEYS`) are held at the actuator profile's
+    default pose and named in ``provenance["held_joints"]``; a file without a leg, waist or arm joint is an
+    :class:`InputError`. A body that is not a G1 link is the object: its geometry is
     ``object_geometry=``, else ``<name>.obj`` in the folder or its parent; none is an :class:`InputError`.
 
 GMR ``.pkl`` (a pickle of numpy arrays)
@@ -50,6 +53,7 @@ from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES, actuator_profile, g1_m
 from pipeline.rotations import xyzw_to_wxyz
 
 HELD_JOINT_KEYS = ("wrist",)  # joints a motion file may lack: they carry no weight, held at the default pose
+HDMI_ROOT_PLACEHOLDER = "root"  # HDMI's joint_names entry (and joint_pos column) for the free joint: dropped
 
 
 def _array(d, key: str, width: int | None, src: str, frames: int | None = None) -> np.ndarray:
@@ -206,12 +210,17 @@ def read_hdmi_motion(folder: str | Path, *, object_geometry: ObjectGeometry | No
         if key not in meta:
             raise InputError(folder / "meta.json", key, "missing")
     d, _ = load_npz(folder / "motion.npz")
-    jp = _array(d, "joint_pos", len(meta["joint_names"]), src)
+    names = [str(n) for n in meta["joint_names"]]
+    jp = _array(d, "joint_pos", len(names), src)
     T = jp.shape[0]
-    joints, held = _joints_with_held([str(n) for n in meta["joint_names"]], jp, src)
+    keep = [k for k, n in enumerate(names) if n != HDMI_ROOT_PLACEHOLDER]  # the free joint's column: not a joint
+    joints, held = _joints_with_held([names[k] for k in keep], jp[:, keep], src)
     bodies = [str(n) for n in meta["body_names"]]
     if "pelvis" not in bodies:
         raise InputError(folder / "meta.json", "body_names", "no pelvis body: the root is unknown")
+    for key in ("body_pos_w", "body_quat_w"):
+        if key not in d:
+            raise InputError(src, key, f"missing from motion.npz (keys are {', '.join(sorted(d))})")
     pos, quat = np.asarray(d["body_pos_w"], np.float64), np.asarray(d["body_quat_w"], np.float64)
     if pos.shape[:2] != (T, len(bodies)) or quat.shape[:2] != (T, len(bodies)):
         raise InputError(src, "body_pos_w", f"shapes {pos.shape}, {quat.shape} do not match ({T}, {len(bodies)}, .)")
