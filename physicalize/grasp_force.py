@@ -68,9 +68,15 @@ def hand_friction(model: mujoco.MjModel, hand_geoms: list[list[int]], object_geo
 
 
 def floor_friction(model: mujoco.MjModel, geoms: list[int]) -> float:
-    """Sliding friction of the object's geoms on the floor (MuJoCo's mixing rule)."""
+    """Sliding friction of the object's geoms on the floor: their explicit contact pairs' with the floor
+    (:func:`pipeline.scene.add_floor_pairs`), else MuJoCo's mixing rule."""
     floor = model.geom("floor").id
-    return max(contact_friction(model, g, floor)[1] for g in geoms) if geoms else 0.0
+    pairs = {
+        int(b if a == floor else a): float(model.pair_friction[p, 0])
+        for p, (a, b) in enumerate(zip(model.pair_geom1, model.pair_geom2))
+        if floor in (a, b)
+    }
+    return max(pairs.get(g, contact_friction(model, g, floor)[1]) for g in geoms) if geoms else 0.0
 
 
 def normal_force(load: np.ndarray, n: np.ndarray, mu: float, cfg: GraspConfig) -> tuple[float, bool]:

@@ -119,8 +119,11 @@ class ObjectTrack:
     contact: np.ndarray | None = None
     mass: float | None = None
     source: str = ""
-    # sliding friction coefficient against anything it touches (the object's geoms win MuJoCo's mixing)
+    # sliding friction against the robot and other objects, and against the floor (ObjectPhysics)
     friction: float | None = None
+    floor_friction: float | None = None
+    # where mass and frictions come from (pipeline.materials: the object kind's material, or "default")
+    material: str = ""
 
     def __post_init__(self):
         pose = check_array(self.pose, (None, 7), f"object {self.name} pose", self.source)
@@ -133,7 +136,7 @@ class ObjectTrack:
                     self.source, f"object {self.name} contact", f"has {c.shape[0]} frames, pose has {pose.shape[0]}"
                 )
             object.__setattr__(self, "contact", c)
-        for key in ("mass", "friction"):
+        for key in ("mass", "friction", "floor_friction"):
             v = getattr(self, key)
             if v is not None and not (np.isfinite(v) and v > 0):
                 raise InputError(self.source, f"object {self.name} {key}", f"must be a positive number, got {v!r}")
@@ -143,9 +146,13 @@ class ObjectTrack:
         return self.pose.shape[0]
 
     def physics(self) -> ObjectPhysics:
-        """The scene properties of this object: its own mass and friction where known, else the defaults."""
+        """The scene properties of this object: its own mass and frictions where known, else the defaults."""
         default = ObjectPhysics()
-        return ObjectPhysics(mass=self.mass or default.mass, friction=self.friction or default.friction)
+        return ObjectPhysics(
+            mass=self.mass or default.mass,
+            friction=self.friction or default.friction,
+            floor_friction=self.floor_friction or default.floor_friction,
+        )
 
     def resampled(self, fps: float, new_fps: float) -> ObjectTrack:
         t, nt = _resample_times(self.frames, fps, new_fps)
@@ -218,6 +225,10 @@ class HumanClip:
         contacts = None if self.contacts is None else _nearest(t, self.contacts, nt)
         objects = tuple(o.resampled(self.fps, new_fps) for o in self.objects)
         return replace(self, joint_pos=pos, joint_quat=quat, contacts=contacts, objects=objects, fps=new_fps)
+
+
+START_PREFIX_KEY = "start_prefix_frames"
+"""``RobotClip.provenance`` key: the frames of a synthetic start prefix before the clip's own (physicalize.start)."""
 
 
 @dataclass(frozen=True)

@@ -164,8 +164,20 @@ def geometry_from_dict(d: dict) -> ObjectGeometry:
 
 @dataclass(frozen=True)
 class ObjectPhysics:
-    """Physical properties an object gets in a scene (later stages randomise them)."""
+    """Physical properties an object gets in a scene (later stages randomise them): ``mass`` [kg], ``friction``
+    (sliding, of the object's contacts with the robot and other objects), ``floor_friction`` (sliding, of its
+    contacts with the floor: :func:`pipeline.scene.build_spec` gives them an explicit contact pair;
+    :mod:`pipeline.materials` says why the two differ) and ``restitution`` (0: inelastic)."""
 
     mass: float = 2.0
     friction: float = 0.8
+    floor_friction: float = 0.8
     restitution: float = 0.0
+
+    def __post_init__(self):
+        for key in ("mass", "friction", "floor_friction"):
+            v = getattr(self, key)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"object {key} must be a positive number, got {v!r}")
+        if not 0 <= self.restitution < 1:
+            raise ValueError(f"object restitution must be in [0, 1), got {self.restitution!r}")

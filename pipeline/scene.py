@@ -7,7 +7,10 @@ the physics stage's contacts see the same collision model:
   collides (self-collision included); foot capsules have ``condim 3``, ``priority 1``,
   friction 0.6; the others ``condim 1``; visual meshes never collide;
 * objects are free bodies (or fixed ones) with ``priority 2``, so their own friction and
-  restitution govern their contacts with the robot and the floor;
+  restitution govern their contacts with the robot; their contacts with the floor are explicit
+  contact pairs (the object's geoms against ``floor``, the world-object body pair excluded from
+  MuJoCo's own collision search) with the object's ``floor_friction`` and the same restitution
+  (:func:`add_floor_pairs`; :mod:`pipeline.materials` says why the two frictions differ);
 * restitution ``e`` (0 = MuJoCo's default inelastic contact) becomes a contact spring in
   MuJoCo's direct form, ``solref = (-w^2, -2 zeta w)`` with ``w = 60 rad/s`` and
   ``solimp = (0.99, 0.99, 0.001)``, where ``zeta`` comes from the damped-oscillator relation
@@ -160,7 +163,7 @@ def _add_mesh_geom(spec, body, name: str, mesh: trimesh.Trimesh, *, collide: boo
     return body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name)
 
 
-def _add_object(spec: mujoco.MjSpec, obj: SceneObject) -> None:
+def _add_object(spec: mujoco.MjSpec, obj: SceneObject) -> list[str]:
     body = spec.worldbody.add_body(name=obj.name, pos=list(obj.pose[:3]), quat=list(obj.pose[3:7]))
     if not obj.fixed:
         body.add_freejoint(name=f"{obj.name}_free")
@@ -203,6 +206,24 @@ def _add_object(spec: mujoco.MjSpec, obj: SceneObject) -> None:
             g.solref, g.solimp = contact_spring(np.float64(zeta)).tolist(), list(RESTITUTION_SOLIMP)
         g.mass = phys.mass * vol / total
         g.rgba = [0.8, 0.5, 0.2, 1.0]
+    return [g.name for g, _ in collide]
+
+
+def add_floor_pairs(
+    spec: mujoco.MjSpec, floor: str, body: str, geoms: list[str], physics: ObjectPhysics, world: str = "world"
+) -> None:
+    """The contacts of ``body``'s ``geoms`` with the ``floor`` geom as explicit pairs of ``physics.floor_friction``
+    (condim 3) and its restitution spring; MuJoCo's own collision search then skips the ``world``-``body`` pair
+    (an exclusion touches only that search, never explicit pairs). The mjlab backend calls it on its scene, whose
+    names carry the entities' prefixes."""
+    mu = physics.floor_friction
+    for name in geoms:
+        pair = spec.add_pair(name=f"{name}_floor", geomname1=floor, geomname2=name)
+        pair.condim, pair.friction = 3, [mu, mu, 0.005, 0.0001, 0.0001]
+        if physics.restitution > 0:
+            zeta = np.float64(restitution_damping_ratio(physics.restitution))
+            pair.solref, pair.solimp = contact_spring(zeta).tolist(), list(RESTITUTION_SOLIMP)
+    spec.add_exclude(bodyname1=world, bodyname2=body)
 
 
 def object_spec(obj: SceneObject) -> mujoco.MjSpec:
@@ -242,7 +263,9 @@ def build_spec(
     floor.contype = floor.conaffinity = 1
     floor.condim, floor.friction = 3, [1.0, 0.005, 0.0001]
     for obj in objects:
-        _add_object(spec, obj)
+        geoms = _add_object(spec, obj)
+        if not obj.fixed:
+            add_floor_pairs(spec, "floor", obj.name, geoms, obj.physics)
     return spec
 
 

@@ -74,6 +74,10 @@ def test_object_physics_defaults_and_validation():
     pose = np.tile([0, 0, 0, 1.0, 0, 0, 0], (4, 1))
     assert ObjectTrack("box", BOX, pose).physics() == ObjectPhysics()
     assert ObjectTrack("box", BOX, pose, mass=20.0, friction=0.15).physics() == ObjectPhysics(mass=20.0, friction=0.15)
+    got = ObjectTrack("box", BOX, pose, friction=0.7, floor_friction=0.3).physics()
+    assert (got.friction, got.floor_friction) == (0.7, 0.3)
+    with pytest.raises(InputError, match="object box floor_friction: must be a positive number, got 0"):
+        ObjectTrack("box", BOX, pose, floor_friction=0)
     with pytest.raises(InputError, match=r"clip\.pt: object box friction: must be a positive number, got -0\.1"):
         ObjectTrack("box", BOX, pose, source="clip.pt", friction=-0.1)
     with pytest.raises(InputError, match="object box mass: must be a positive number, got nan"):

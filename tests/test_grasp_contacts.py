@@ -41,7 +41,8 @@ def _scene(mass: float = 1.0):
         pose=(POS[0] + 0.1, 0.0, top / 2, 1, 0, 0, 0),
         fixed=True,
     )
-    box = SceneObject("box", Primitive("box", HALF), ObjectPhysics(mass=mass, friction=MU), pose=(*POS, 1, 0, 0, 0))
+    physics = ObjectPhysics(mass=mass, friction=MU, floor_friction=MU)  # the planner takes its support as the floor
+    box = SceneObject("box", Primitive("box", HALF), physics, pose=(*POS, 1, 0, 0, 0))
     return build_scene([box, pedestal])
 
 

@@ -92,7 +92,8 @@ def test_the_same_state_gives_the_same_observation_and_reward(episodes, mjlab_en
 
 
 def _check_object_fields(env, cpu) -> None:
-    """Each world's object as the CPU scene built it: part sizes and positions, friction, restitution, mass, inertia
+    """Each world's object as the CPU scene built it: part sizes and positions, friction (with the robot; the floor
+    pairs'), restitution, mass, inertia
     (the tensor about the centre of mass: MuJoCo's principal axes may come in another order) and the constants
     ``mj_setConst`` derives."""
     import mujoco
@@ -119,6 +120,9 @@ def _check_object_fields(env, cpu) -> None:
                  ("geom_friction", mine["geom_friction"][i, gi], m0.geom_friction[g0]),
                  ("geom_solref", mine["geom_solref"][i, gi], m0.geom_solref[g0]),
                  ("geom_solimp", mine["geom_solimp"][i, gi], m0.geom_solimp[g0]),
+                 ("pair_friction", mine["pair_friction"][i], np.broadcast_to(m0.pair_friction[0], (len(g), 5))),
+                 ("pair_solref", mine["pair_solref"][i], np.broadcast_to(m0.pair_solref[0], (len(g), 2))),
+                 ("pair_solimp", mine["pair_solimp"][i], np.broadcast_to(m0.pair_solimp[0], (len(g), 5))),
                  ("body_mass", mine["body_mass"][i, b], m0.body_mass[b0]),
                  ("body_ipos", mine["body_ipos"][i, b], m0.body_ipos[b0]),
                  ("inertia tensor", tensor(mine["body_iquat"][i, b], mine["body_inertia"][i, b]),

@@ -55,8 +55,10 @@ def test_a_box_becomes_a_cylinder_of_its_height_and_mean_half_width_only_when_dr
 
 
 def test_physical_properties_scale_mass_and_friction_and_set_restitution():
-    p = object_physics(BOX, Variation(mass_factor=1.5, friction_factor=0.5, restitution=0.2))
-    assert (p.mass, p.friction, p.restitution) == pytest.approx((3.0, 0.4, 0.2))
+    p = object_physics(
+        replace(BOX, floor_friction=0.3), Variation(mass_factor=1.5, friction_factor=0.5, restitution=0.2)
+    )
+    assert (p.mass, p.friction, p.floor_friction, p.restitution) == pytest.approx((3.0, 0.4, 0.15, 0.2))
 
 
 def test_initial_state_offsets_move_the_root_the_objects_and_the_joints_within_their_range():

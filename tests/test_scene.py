@@ -170,3 +170,44 @@ def test_link_contact_surfaces():
     assert len(names("left_ankle_roll_link")) == 7
     with pytest.raises(ValueError, match="'nose' is not a body"):
         link_collision_geoms(m, "nose")
+
+
+def _push_box(hand_mu: float, floor_mu: float, height: float, force_share: float) -> tuple[float, float]:
+    """``(travel [m], tilt [deg])`` after 1 s of a horizontal push of ``force_share`` x m g at ``height`` above the
+    floor on a 0.4 x 0.4 x 0.8 m, 2 kg box (its own robot-contact friction ``hand_mu``, its floor pair's
+    ``floor_mu``), far from the robot."""
+    half = np.array([0.2, 0.2, 0.4])
+    box = SceneObject(
+        "box", Primitive("box", tuple(half)), ObjectPhysics(2.0, hand_mu, floor_mu), pose=(5, 0, half[2], 1, 0, 0, 0)
+    )
+    m = build_scene([box]).model
+    d = mujoco.MjData(m)
+    b = m.body("box").id
+    f = np.array([force_share * 2.0 * 9.81, 0.0, 0.0])
+    for _ in range(200):
+        d.qfrc_applied[:] = 0
+        point = d.xpos[b] + [-half[0], 0.0, height - d.xpos[b][2]]  # on the back face, ``height`` above the floor
+        mujoco.mj_applyFT(m, d, f, np.zeros(3), point, b, d.qfrc_applied)
+        mujoco.mj_step(m, d)
+    up = d.xmat[b].reshape(3, 3)[:, 2]
+    return float(d.qpos[-7] - 5.0), float(np.degrees(np.arccos(np.clip(up[2], -1, 1))))
+
+
+def test_a_box_pushed_low_slides_at_its_floor_friction_not_its_hand_friction():
+    """Pushed at h = 0.2 m over half-width b = 0.2 m (h / b = 1 < 1 / mu): it slides once the push exceeds
+    mu_floor m g, and the hand friction (0.9, the object's geoms) plays no part (the floor pair decides)."""
+    travel, tilt = _push_box(0.9, 0.3, 0.2, 0.4)
+    assert travel == pytest.approx(0.5 * (0.4 - 0.3) * 9.81, rel=0.1) and tilt < 2.0  # (F / m - mu g) t^2 / 2
+    travel, tilt = _push_box(0.9, 0.3, 0.2, 0.2)  # below mu m g: it stays
+    assert abs(travel) < 0.01 and tilt < 2.0
+    travel, tilt = _push_box(0.3, 0.9, 0.2, 0.4)  # the same push on a grippy floor: it stays
+    assert abs(travel) < 0.01 and tilt < 2.0
+
+
+def test_a_box_pushed_high_tips_before_it_slides():
+    """Pushed at h = 0.6 m (h / b = 3 > 1 / mu = 1.25 at mu 0.8): it tips once the push exceeds m g b / h = 0.33 m g,
+    long before it could slide (0.8 m g); at mu 0.25 (h / b < 4) the same push slides it upright."""
+    travel, tilt = _push_box(0.8, 0.8, 0.6, 0.45)
+    assert tilt > 45.0
+    travel, tilt = _push_box(0.8, 0.25, 0.6, 0.3)
+    assert travel == pytest.approx(0.5 * (0.3 - 0.25) * 9.81, rel=0.1) and tilt < 2.0

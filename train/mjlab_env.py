@@ -78,7 +78,7 @@ from pipeline.scene import (
 )
 from train import rewards as R
 from train.episodes import Episode
-from train.mjlab_object import entity_spec
+from train.mjlab_object import add_object_floor_pairs, entity_spec
 from train.mjlab_terms import (
     NoisyJointTargetsCfg,
     Worlds,
@@ -144,7 +144,8 @@ def env_cfg(worlds: Worlds, envs: int, history: int, weights: R.RewardWeights,
         spec_fn=lambda: _robot_spec(profile),
         articulation=EntityArticulationInfoCfg(actuators=(XmlActuatorCfg(target_names_expr=(".*_joint",)),)),
     )
-    obj = EntityCfg(spec_fn=lambda: entity_spec(shapes, SceneObject("object", first.geometry, first.physics())))
+    scene_object = SceneObject("object", first.geometry, first.physics())
+    obj = EntityCfg(spec_fn=lambda: entity_spec(shapes, scene_object))
     w, lw = {"worlds": worlds}, {"worlds": worlds, "links": links}
 
     def obs(func, params=None, steps=0) -> ObservationTermCfg:
@@ -159,7 +160,11 @@ def env_cfg(worlds: Worlds, envs: int, history: int, weights: R.RewardWeights,
     frames = int(worlds.frames.max())
     return ManagerBasedRlEnvCfg(
         decimation=SUBSTEPS,
-        scene=SceneCfg(num_envs=envs, entities={"robot": robot, "object": obj}),
+        scene=SceneCfg(
+            num_envs=envs,
+            entities={"robot": robot, "object": obj},
+            spec_fn=lambda spec: add_object_floor_pairs(spec, scene_object),
+        ),
         sim=SimulationCfg(nconmax=CONTACTS, njmax=CONSTRAINT_ROWS, mujoco=MujocoCfg(**_options())),
         observations={"policy": ObservationGroupCfg(terms=policy), "critic": ObservationGroupCfg(terms=critic)},
         actions={

@@ -1,7 +1,8 @@
 """The object of each mjlab world (:mod:`train.mjlab_env`): a free body made of box parts -- one box, or a chair's
 six (:func:`pipeline.geometry.chair_boxes`) -- and, where boxes may be drawn as cylinders
 (:func:`train.randomize.vary_shape`), one cylinder slot; each world holds its own copy of the sizes, positions, mass,
-inertia, friction and restitution, written at every restart from the episode and its draw.
+inertia, friction (with the robot; with the floor: explicit contact pairs, :func:`add_object_floor_pairs`) and
+restitution, written at every restart from the episode and its draw.
 
 MuJoCo Warp fixes the number and types of geoms at start-up, the same in every world, so every world's object has
 the most box parts any episode needs, plus the cylinder slot. The slots a world does not use shrink to
@@ -23,15 +24,15 @@ import numpy as np
 import torch
 
 from pipeline.geometry import Chair, Primitive, chair_boxes, chair_scaled
-from pipeline.scene import RESTITUTION_SOLIMP, SceneObject, object_spec, restitution_solref
+from pipeline.scene import RESTITUTION_SOLIMP, SceneObject, add_floor_pairs, object_spec, restitution_solref
 from train.episodes import Episode
 
 PAD_HALF = 1e-4
 """[m] half-extent of a box world's unused parts (MuJoCo needs positive sizes)."""
 
 MODEL_FIELDS = ("geom_size", "geom_pos", "geom_rbound", "geom_aabb", "geom_friction", "geom_solref", "geom_solimp",
-                "body_mass", "body_ipos", "body_iquat", "body_inertia", "body_subtreemass", "body_invweight0",
-                "dof_invweight0")  # fmt: skip
+                "pair_friction", "pair_solref", "pair_solimp", "body_mass", "body_ipos", "body_iquat", "body_inertia",
+                "body_subtreemass", "body_invweight0", "dof_invweight0")  # fmt: skip
 """The model fields each world holds its own copy of (mjlab's ``requires_model_fields``)."""
 
 
@@ -76,6 +77,7 @@ class Shapes:
         self.chair_fields = tensor([astuple(o.geometry if c else Chair()) for o, c in zip(objects, self.chair)])
         self.mass = tensor([p.mass for p in physics])
         self.friction = tensor([p.friction for p in physics])
+        self.floor_friction = tensor([p.floor_friction for p in physics])
 
     def at(self, episode: torch.Tensor, scale: torch.Tensor, cylinder: torch.Tensor) -> Parts:
         """The slots of episodes ``episode`` at the per-axis ``scale`` (n, 3), a box drawn as a cylinder where
@@ -185,6 +187,14 @@ def entity_spec(shapes: Shapes, obj: SceneObject) -> mujoco.MjSpec:
     return spec
 
 
+def add_object_floor_pairs(spec: mujoco.MjSpec, obj: SceneObject) -> None:
+    """On mjlab's scene ``spec`` (the entities attached as ``robot/`` and ``object/``), the object's floor contacts
+    as :func:`pipeline.scene.build_spec` makes them (:func:`pipeline.scene.add_floor_pairs`): one pair per collision
+    geom of the object entity, the cylinder slot included."""
+    geoms = [g.name for g in spec.geoms if g.name.startswith("object/") and g.contype]
+    add_floor_pairs(spec, "robot/floor", f"object/{obj.name}", geoms, obj.physics)
+
+
 def write_object(env, ids: torch.Tensor, shapes: Shapes, parts: Parts, draws: dict, episode: torch.Tensor) -> None:
     """Worlds ``ids`` take the object ``parts`` of their episodes under ``draws`` (:func:`train.randomize.draw_batch`'s,
     as tensors): slot sizes and positions, mass (:func:`train.randomize.object_physics`), inertia, friction,
@@ -199,12 +209,16 @@ def write_object(env, ids: torch.Tensor, shapes: Shapes, parts: Parts, draws: di
     m.geom_rbound[rows, cols] = geoms["rbound"]
     m.geom_aabb[rows, cols] = torch.stack([torch.zeros_like(geoms["aabb"]), geoms["aabb"]], 2)  # (centre, half)
     m.geom_friction[rows, cols, 0] = (shapes.friction[episode] * draws["friction_factor"])[:, None]
+    m.pair_friction[ids, :, :2] = (shapes.floor_friction[episode] * draws["friction_factor"])[:, None, None]
     e_rest = draws["restitution"]
     bouncy = (e_rest > 0)[:, None, None]
     solref = restitution_solref(e_rest.clamp(min=1e-6))[:, None]
-    m.geom_solref[rows, cols] = torch.where(bouncy, solref, env.sim.get_default_field("geom_solref")[g])
     solimp = torch.as_tensor(RESTITUTION_SOLIMP, device=mass.device, dtype=mass.dtype)
-    m.geom_solimp[rows, cols] = torch.where(bouncy, solimp, env.sim.get_default_field("geom_solimp")[g])
+    default = env.sim.get_default_field
+    m.geom_solref[rows, cols] = torch.where(bouncy, solref, default("geom_solref")[g])
+    m.geom_solimp[rows, cols] = torch.where(bouncy, solimp, default("geom_solimp")[g])
+    m.pair_solref[ids] = torch.where(bouncy, solref, default("pair_solref"))  # every pair is the object's
+    m.pair_solimp[ids] = torch.where(bouncy, solimp, default("pair_solimp"))
     body = rigid_body(mass, geoms["volume"], geoms["unit"], geoms["pos"])
     world_mass = env.sim.get_default_field("body_subtreemass")[0] - env.sim.get_default_field("body_mass")[b]
     m.body_mass[ids, b], m.body_ipos[ids, b], m.body_iquat[ids, b] = mass, body["ipos"], body["iquat"]

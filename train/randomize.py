@@ -6,7 +6,8 @@ range of 0 (or a factor range of (1, 1)) switches one off:
 1. **object geometry**: a per-axis scale (the ``scale`` of the episode draw, 0.4-1.6 as the evaluation's), a box
    drawn as a circular cylinder of the same height and mean half-width with ``cylinder_prob`` (primitive boxes
    only);
-2. **physical properties**: the object's mass and friction times a factor, a restitution coefficient
+2. **physical properties**: the object's mass and frictions (with the robot and with the floor) times a factor, a
+   restitution coefficient
    (:func:`object_physics`; the scene builder turns restitution into a contact spring);
 3. **initial conditions**: the robot's root and the objects shifted in x, y and turned about z, the joints moved
    around the episode's first (standing) pose (:func:`perturb_initial_state`); the placement perturbation of the
@@ -129,9 +130,11 @@ def vary_shape(o: ObjectTrack, v: Variation) -> ObjectTrack:
 
 
 def object_physics(o: ObjectTrack, v: Variation) -> ObjectPhysics:
-    """The object's own mass and friction times the draw's factors, with the draw's restitution."""
+    """The object's own mass and both frictions (with the robot, with the floor) times the draw's factors, with the
+    draw's restitution."""
     p = o.physics()
-    return ObjectPhysics(p.mass * v.mass_factor, p.friction * v.friction_factor, v.restitution)
+    f = v.friction_factor
+    return ObjectPhysics(p.mass * v.mass_factor, p.friction * f, p.floor_friction * f, v.restitution)
 
 
 def placed(o: ObjectTrack, v: Variation) -> tuple[float, ...]:

@@ -71,6 +71,8 @@ def object_data(clip, with_contact: set[str]) -> tuple[dict, list[dict]]:
                 "geometry": geometry_to_dict(o.geometry),
                 "mass": o.mass,
                 "friction": o.friction,
+                "floor_friction": o.floor_friction,
+                "material": o.material,
                 "source": o.source,
                 "has_contact": o.contact is not None,
             }
@@ -91,7 +93,17 @@ def objects_from_episode(ep: Episode, source: str) -> tuple[ObjectTrack, ...]:
         except (ValueError, KeyError, TypeError) as exc:  # e.g. a zero scale written by another tool
             raise InputError(source, f"object {m['name']} geometry", str(exc)) from None
         out.append(
-            ObjectTrack(m["name"], geometry, pose, contact, m.get("mass"), m.get("source", source), m.get("friction"))
+            ObjectTrack(
+                m["name"],
+                geometry,
+                pose,
+                contact,
+                m.get("mass"),
+                m.get("source", source),
+                m.get("friction"),
+                m.get("floor_friction"),
+                m.get("material", ""),
+            )
         )
     return tuple(out)
 
@@ -117,7 +129,6 @@ def objects_note(clips) -> str:
     parts = [f"`{col}`: {label} in {n} episode(s)" for (col, label), n in seen.items()]
     return (
         "Objects are columns by role (`object.*` the clip's object), not by mesh; which object an episode holds "
-        "(name, geometry, mass, friction) is in its metadata (`meta/lessmimic_episodes.jsonl`, `objects`). "
-        + "; ".join(parts)
-        + "."
+        "(name, geometry, mass, hand and floor friction, material) is in its metadata "
+        "(`meta/lessmimic_episodes.jsonl`, `objects`). " + "; ".join(parts) + "."
     )

@@ -29,6 +29,9 @@ What the data shows (checked on ``sub3_largebox_003`` and ``sub2_largetable_000`
 Contacts: ``HumanClip.contacts`` is ``label > 0.5`` per body; the object track's contact
 is column 330.
 
+Object physics: mass, hand-object and object-floor friction of the object's kind (by the name, e.g.
+``largebox``) from :data:`pipeline.materials.OBJECT_KINDS` (the files carry none).
+
 Object mesh: ``mesh=`` or, beside the clip, the object named in the file name
 (``sub3_largebox_003.pt`` -> ``largebox``) as ``largebox.obj``, ``largebox_largebox.obj``
 (InterMimic), ``largebox/largebox.obj`` or ``largebox_cleaned_simplified.obj`` (OMOMO).
@@ -51,6 +54,7 @@ import numpy as np
 from pipeline.clip import HumanClip, ObjectTrack
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.geometry import MeshGeometry
+from pipeline.materials import object_physics_for
 from pipeline.readers.amass import SMPLH_FINGERS, SMPLH_JOINT_NAMES, SMPLH_SKELETON
 from pipeline.readers.keypoints import estimate_height, load_numpy_pickle, plausible_height
 from pipeline.rotations import xyzw_to_wxyz
@@ -219,7 +223,18 @@ def read_omomo(path: str | Path, *, mesh: str | Path | None = None, subject_heig
     quat = xyzw_to_wxyz(a[:, 383:591].reshape(T, 52, 4))[:, TO_SMPLH]
     contacts = a[:, 331:383][:, TO_SMPLH] > 0.5
     obj_pose = np.concatenate([a[:, 318:321], xyzw_to_wxyz(a[:, 321:325])], axis=1)
-    track = ObjectTrack(obj_name, geometry, obj_pose, contact=a[:, 330] > 0.5, source=src)
+    physics, material = object_physics_for(obj_name)
+    track = ObjectTrack(
+        obj_name,
+        geometry,
+        obj_pose,
+        contact=a[:, 330] > 0.5,
+        source=src,
+        mass=physics.mass,
+        friction=physics.friction,
+        floor_friction=physics.floor_friction,
+        material=material,
+    )
     if subject_height is None:
         subject_height = height_from_dict(path, subject) or plausible_height(estimate_height(pos, SMPLH_SKELETON))
     return HumanClip(

@@ -36,8 +36,8 @@ phases may overlap, never leave gaps):
   turn 2.1-5.1 (180 deg in place, 4 steps of 45 deg + closing), sit_down 5.1-6.4 (trunk
   flexes ~40 deg, pelvis back 0.5 m onto the seat, down to seat + 0.13 m), seated 6.4-7.8
   (hands on thighs), stand_up 7.8-9.1, stand 9.1-9.4.
-* **Push** (8.3 s; box 0.6 x 0.6 x 1.2 m, 20 kg on sliders: friction 0.15): stand 0-0.3, approach 0.3-2.6, reach 2.6-3.3
-  (hands on the near face at 1.10 m), brace 3.3-3.4, push 3.4-6.05 (1.0 m at ~0.45 m/s,
+* **Push** (8.3 s; box 0.6 x 0.6 x 1.2 m, 20 kg on sliders: floor friction 0.15): stand 0-0.3, approach
+  0.3-2.6, reach 2.6-3.3 (hands on the near face at 1.10 m), brace 3.3-3.4, push 3.4-6.05 (1.0 m at ~0.45 m/s,
   the box slides with the hands), release 6.05-6.65, step_back 6.55-7.95 (0.3 m), stand.
 * **Carry** (9.5 s; the PickUp box, ~0.97 m ahead): stand 0-0.3, approach 0.3-1.6, squat_reach
   1.6-2.6, grasp 2.6-2.85, lift 2.85-3.85, carry 3.85-6.9 (2.1 m: 0.9 m straight, a 90 deg

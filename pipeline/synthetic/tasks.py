@@ -21,10 +21,11 @@ SMALL_BOX_MASS, LARGE_BOX_MASS, CHAIR_MASS = 1.5, 20.0, 6.0
 # waist pitch motor (50 N m; physicalize.static_torque, the grasp's loads) is 0.87 / 0.93 / 1.00 / 1.07 / 1.14
 # of its limit at 1 / 1.5 / 2 / 2.5 / 3 kg, and the physicalized PickUp held the box up to 1.5 kg and
 # lost it in the lift from 2 kg on.
-# The pushed box stands on furniture sliders: pushed at 1.10 m it slides at mu m g = 29 N; it tips about
-# its far bottom edge at m g (0.30 m) / (1.10 m) = 54 N (with the default friction 0.8 it would tip long
-# before sliding at 157 N, which makes the demonstration physically impossible).
-LARGE_BOX_FRICTION = 0.15
+# The pushed box stands on furniture sliders (its floor friction; the hands keep the default friction): pushed at
+# 1.10 m it slides at mu m g = 29 N; it tips about its far bottom edge at m g (0.30 m) / (1.10 m) = 54 N (with a
+# floor friction of 0.8 it would tip long before sliding at 157 N, which makes the demonstration physically
+# impossible).
+LARGE_BOX_FLOOR_FRICTION = 0.15
 OBJECT_NAME = "object"  # one name in every clip: a dataset has one feature spec (geometry is per clip)
 
 # Lifting from the floor: the box centre this far ahead of the ankles' midpoint; squat posture.
@@ -214,6 +215,11 @@ def push(rng, fps: float):
     target = grip_points(pose, LARGE_GRIP) + _approach([[-1.0, 0.0, 0.0]] * 2, hw, out=0.08, up=0.0)
     touch = hw >= 1.0
     obj = dict(
-        name=OBJECT_NAME, geometry=LARGE_BOX, pose=pose, contact=touch, mass=LARGE_BOX_MASS, friction=LARGE_BOX_FRICTION
+        name=OBJECT_NAME,
+        geometry=LARGE_BOX,
+        pose=pose,
+        contact=touch,
+        mass=LARGE_BOX_MASS,
+        floor_friction=LARGE_BOX_FLOOR_FRICTION,
     )
     return make_demo("Push", fps, body, target, [obj], phases, {"left_wrist": touch, "right_wrist": touch})
