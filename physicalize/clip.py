@@ -15,9 +15,16 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from physicalize.feasibility import grasp_feasibility, rejection
+from physicalize.feasibility import (
+    grasp_feasibility,
+    grasp_opposition,
+    reach_figures,
+    rejection,
+    rejection_reason,
+)
 from physicalize.problem import object_qpos, tracking_problem
 from physicalize.rollout import Rollout, initial_state, replay, simulate
+from physicalize.start import clean_start, prefix_frames
 from physicalize.static_torque import static_torque_figures
 from physicalize.validate import failure_class, validate
 from physicalize.wbc import WholeBodyController
@@ -25,6 +32,7 @@ from physicalize.wbc_config import TEACHER_GAINS, WBCConfig
 from pipeline.clip import RobotClip
 from pipeline.errors import InputError
 from pipeline.robot import FREE_NQ, NQ_ROBOT
+from pipeline.take import take_kind
 
 TEACHERS = ("base", "base+residual:<checkpoint>", "kinematic")
 REPLAY_TOL_M = 1e-6
@@ -90,6 +98,12 @@ def _reference_figures(scene, ref, clip: RobotClip) -> tuple[dict, str]:
     figures = static_torque_figures(ref.qpos, loads, scene.profile.effort_limit, fps)
     figures["reference_first_contact_s"] = first_contact_s(clip)
     figures.update(grasp_feasibility(scene.model, ref.grasp, object_qpos(scene, clip, ref.frames), fps))
+    figures.update(reach_figures(scene, ref, clip.contact_links, clip.contacts, {o.name: o.pose for o in clip.objects}))
+    kind = take_kind(clip.objects[0].pose) if clip.objects else None
+    figures["take_kind"] = None if kind is None else kind.kind
+    figures["take_rise_m"], figures["take_travel_m"] = (None, None) if kind is None else (kind.rise_m, kind.travel_m)
+    figures["human_hand_opposition"] = clip.provenance.get("human_hand_opposition")
+    figures["reference_hand_opposition"] = grasp_opposition(ref.grasp)
     if ref.grasp is None:
         held = outside = np.zeros(0, bool)
     else:
@@ -124,13 +138,9 @@ def _figures(
     return figures
 
 
-def _rejected(figures: dict, rejected: str, fps: float) -> dict:
+def _rejected(figures: dict, rejected: str) -> dict:
     """The figures of a clip rejected before tracking (:func:`physicalize.feasibility.rejection`)."""
-    frac, start = figures["reference_hold_infeasible_frac"], figures["reference_hold_infeasible_from_s"]
-    why = (
-        f"rejected: {rejected}: pressing hands cannot give the force the held object needs on {frac:.0%} of the "
-        f"held frames, from t={start:.2f} s (it must be pulled or gripped)"
-    )
+    why = rejection_reason(figures, rejected)
     return {**figures, "valid": False, "rejected": rejected, "failure": None, "reason": why}
 
 
@@ -158,12 +168,13 @@ def physicalize_clip(
     residual = None if spec.checkpoint is None else load_residual(str(spec.checkpoint), spec.digest)
     gains = (TEACHER_GAINS if gains is None else tuple(gains))[: 1 if residual is not None else None]
     t0, cpu0 = time.perf_counter(), time.process_time()
+    clip = clean_start(clip)
     scene, ref, objects, zmp = tracking_problem(clip, profile, reference, grasp)
     qpos0, qvel0 = initial_state(scene, ref, objects)
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0  # planning + tracking (not the checks)
     ref_figures = _reference_figures(scene, ref, clip)
     if (rejected := rejection(ref_figures[0])) is not None:
-        return None, None, _rejected(ref_figures[0], rejected, clip.fps), {}
+        return None, None, _rejected(ref_figures[0], rejected), {}
     tried = []
     for config in gains:
         t0, cpu0 = time.perf_counter(), time.process_time()
@@ -182,6 +193,7 @@ def physicalize_clip(
             f"; gain set {k}: {f['reason'].split(';')[0]}" for k, (_, f) in enumerate(tried[1:], 1)
         )
     figures["teacher_gains"], figures["teacher_attempts"] = kept, len(tried)
+    figures["start_prefix_s"] = prefix_frames(clip) / clip.fps
     roll.seconds = wall
     figures["realtime_factor"] = roll.frames / clip.fps / max(wall, 1e-9)
     # CPU time of this (single-threaded) process
@@ -224,9 +236,11 @@ def _simulated_clip(clip: RobotClip, scene, roll: Rollout, method: str, provenan
 
 
 def com_series(clip: RobotClip, scene, ref, zmp, roll: Rollout) -> dict:
-    """Reference, planned and simulated CoM, planned ZMP, pelvis heights and the support box: the clip's plot."""
+    """Reference, planned and simulated CoM, planned ZMP, pelvis heights and the support box: the clip's plot; and the
+    tracked reference's ``qpos`` (the dataset's ``reference.state``)."""
     T = roll.frames
     return {
+        "reference_qpos": clip.qpos,  # what was tracked: the retargeted clip after its start prefix, if any
         "reference": ref.com[:T],
         "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T],
         "zmp_planned": None if zmp is None else zmp[:T],

@@ -148,7 +148,7 @@ def grasp_schedule(
     if not scene.object_qpos_adr:
         return None
     m, T = scene.model, ref.frames
-    labels = _hand_labels(contact_links, contacts, T, cfg)
+    labels = hand_labels(contact_links, contacts, T, cfg)
     objs = ObjectTracks.of(scene, objects)
     near = hand_reach(scene, ref, objs, max(cfg.max_gap, cfg.clearance))
     holds = _holds(labels, near, objs, cfg)
@@ -190,7 +190,7 @@ def grasp_schedule(
     )
 
 
-def _hand_labels(contact_links: tuple[str, ...], contacts: np.ndarray | None, T: int, cfg: GraspConfig) -> np.ndarray:
+def hand_labels(contact_links: tuple[str, ...], contacts: np.ndarray | None, T: int, cfg: GraspConfig) -> np.ndarray:
     """(T, 2) bool: the clip labels each hand in contact (runs and gaps shorter than ``min_run`` dropped;
     all False without hand labels)."""
     links = list(contact_links)

@@ -24,6 +24,7 @@ from physicalize.clip import TeacherSpec, load_residual, parse_teacher, physical
 from physicalize.kinematic import kinematic_clip
 from physicalize.plot import plot_physicalized
 from physicalize.rollout import Rollout
+from physicalize.start import prefix_frames
 from physicalize.validate import summarise
 from pipeline.clip import PhysicalizedClip, RobotClip
 from pipeline.dataset.card import DatasetCard
@@ -60,12 +61,14 @@ def physicalize_one(item: tuple[int, RobotClip], teacher: str = "base", profile:
     except Exception as exc:  # noqa: BLE001 - a clip that cannot be simulated is reported, the batch goes on
         reason = f"error: {type(exc).__name__}: {exc}"
         return ClipResult(index, clip.source, None, None, {"valid": False, "reason": reason, "failure": "error"}, {})
-    return ClipResult(index, clip.source, robot, roll, figures, {**com, "reference_qpos": clip.qpos})
+    return ClipResult(index, clip.source, robot, roll, figures, {"reference_qpos": clip.qpos, **com})
 
 
 def _clip_key(k: int, item: tuple[int, RobotClip]) -> str:
     clip = item[1]
-    return digest(k, clip.source, clip.qpos, *(p for o in clip.objects for p in (o.pose, o.mass, o.friction)))
+    return digest(
+        k, clip.source, clip.qpos, *(p for o in clip.objects for p in (o.pose, o.mass, o.friction, o.floor_friction))
+    )
 
 
 CARD_NOTES = [
@@ -212,7 +215,11 @@ def _write_logs(results: list[ClipResult], clips: list[RobotClip], logs: Path) -
     for r in tqdm([r for r in results if r.robot is not None], desc="logs and plots", unit="clip"):
         stem = f"{r.index:03d}_{file_stem(r.source)}"
         write_robot_log(r.robot, logs / f"{stem}.mcap")
-        objs = {o.name: (clips[r.index].objects[k].pose[:, 2], o.pose[:, 2]) for k, o in enumerate(r.robot.objects)}
+        n = prefix_frames(r.robot)  # the reference holds the object where it starts over a start prefix
+        objs = {
+            o.name: (np.pad(clips[r.index].objects[k].pose[:, 2], (n, 0), mode="edge"), o.pose[:, 2])
+            for k, o in enumerate(r.robot.objects)
+        }
         verdict = "valid" if r.figures["valid"] else "INVALID: " + r.figures["reason"]
         title = f"{r.source} ({r.robot.task or 'no task'}): {verdict}"
         plot_physicalized(r.com, r.rollout.foot_force, objs, r.robot.fps, title[:150], logs / f"{stem}.png")

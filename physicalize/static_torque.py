@@ -60,12 +60,14 @@ def static_torque_figures(
 ) -> dict:
     """``reference_static_torque_ratio_max`` (max over frames and upper-body joints of ``|tau_s| / tau_max``;
     ``effort``: the 29 effort limits in :data:`pipeline.robot.G1_JOINT_NAMES` order),
-    ``reference_static_torque_joint`` and ``reference_static_torque_at_s``: where it is."""
+    ``reference_static_torque_joint`` and ``reference_static_torque_at_s``: where it is;
+    ``reference_static_torque_over_s``: how long some joint's ratio is above 1."""
     effort = np.asarray(effort, float)[[G1_JOINT_NAMES.index(j) for j in UPPER_BODY_JOINTS]]
     ratio = np.abs(static_torques(qpos, hand_loads)) / effort
     t, i = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
     return {
         "reference_static_torque_ratio_max": float(ratio[t, i]),
+        "reference_static_torque_over_s": float((ratio.max(axis=1) > 1.0).sum() / fps),
         "reference_static_torque_joint": UPPER_BODY_JOINTS[i],
         "reference_static_torque_at_s": float(t / fps),
     }

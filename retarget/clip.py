@@ -12,6 +12,7 @@ from dataclasses import replace
 from pipeline.clip import HumanClip, RobotClip
 from pipeline.errors import InputError
 from pipeline.scene import SceneObject, build_scene
+from pipeline.take import human_hand_opposition
 from retarget.contact import link_contact_flags
 from retarget.ik import G1Retargeter
 from retarget.mapping import load_mapping
@@ -64,6 +65,8 @@ def retarget_clip(
             "synthetic": human.synthetic,
             "mapping": mapping.name,
             "source_fps": clip.fps,
+            # the human's grasp (pipeline.take): -1 a squeeze between opposite faces; physicalize's feasibility reads it
+            "human_hand_opposition": human_hand_opposition(human),
         },
     )
     seconds = time.perf_counter() - t0

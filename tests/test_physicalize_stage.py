@@ -111,15 +111,22 @@ def test_the_next_gain_set_is_tried_when_a_rollout_is_invalid():
 
 
 @needs_shared
-def test_a_reference_the_hands_cannot_follow_is_rejected_before_tracking():
-    """The InterMimic table is dragged towards the body by hands that can only press: rejected, not tracked."""
+def test_a_table_raised_by_hands_that_cannot_hold_it_is_rejected_a_slide_never():
+    """The interact table lifted by its near edge needs a grip that pressing hands cannot give: rejected before
+    tracking, with its figure. The InterMimic table dragged towards the body needs a pull too (outside the cone), but
+    it slides on the floor: tracked, and reported valid or failed with its class, never rejected."""
     from pipeline.readers import read_clips
     from retarget.clip import retarget_clip
 
-    clip = retarget_clip(read_clips(SHARED_MOCAP / "intermimic" / "sub2_largetable_000.pt")[0])[0]
-    robot, roll, f, _ = physicalize_clip(clip)
+    lifted = retarget_clip(read_clips(SHARED_MOCAP / "interact" / "sub2_largetable_004.pt")[0])[0]
+    robot, roll, f, _ = physicalize_clip(lifted)
     assert robot is None and roll is None and not f["valid"] and f["rejected"] == "needs a grip"
-    assert f["reference_hold_infeasible_frac"] > 0.5 and f["reason"].startswith("rejected: needs a grip")
+    assert f["take_kind"] == "lift" and f["reference_hold_infeasible_frac"] > 0.5
+    assert f["reason"].startswith("rejected: needs a grip: pressing hands cannot give")
+    dragged = retarget_clip(read_clips(SHARED_MOCAP / "intermimic" / "sub2_largetable_000.pt")[0])[0]
+    robot, roll, f, _ = physicalize_clip(dragged)
+    assert f["take_kind"] == "slide" and f["reference_hold_infeasible_frac"] > 0.5
+    assert not f.get("rejected") and roll is not None and (f["valid"] or f["failure"])
 
 
 def test_bad_arguments_are_one_line_errors(retargeted, capsys):

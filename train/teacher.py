@@ -17,6 +17,7 @@ import numpy as np
 
 from physicalize.problem import tracking_problem
 from physicalize.reference import Reference
+from physicalize.start import clean_start, prefix_frames
 from physicalize.wbc import WholeBodyController
 from physicalize.wbc_config import TEACHER_GAINS
 from pipeline.robot import actuator_profile
@@ -25,8 +26,9 @@ from train.episodes import Episode
 
 def episode_reference(episode: Episode) -> Reference:
     """The feasible reference the physicalize teacher tracked for this episode (its retargeted clip, scale 1, under
-    the episode's actuator profile)."""
-    _, ref, _, _ = tracking_problem(episode.reference, episode.profile)
+    the episode's actuator profile, after the same start prefix where the physicalized episode has one)."""
+    clip = clean_start(episode.reference) if prefix_frames(episode.simulated.robot) else episode.reference
+    _, ref, _, _ = tracking_problem(clip, episode.profile)
     return ref
 
 

@@ -13,7 +13,7 @@ Robot datasets (:func:`robot_clips_to_episodes`, :func:`episodes_to_robot_clips`
   columns by role, the object's identity in the episode meta: :mod:`pipeline.dataset.objects`)
   (:mod:`pipeline.dataset.objects`);
 * ``source_frame`` -- frame index in the source motion: ``t + provenance["source_frame_start"]``
-  (0 when absent).
+  (0 when absent); -1 over a physicalized clip's synthetic start prefix (``provenance["start_prefix_frames"]``).
 
 Physicalized datasets (:func:`physicalized_clips_to_episodes`, :func:`episodes_to_physicalized_clips`):
 the robot features with ``observation.qvel`` from the simulation, plus ``action`` (29 joint position
@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.clip import HumanClip, PhysicalizedClip, RobotClip, Skeleton
+from pipeline.clip import START_PREFIX_KEY, HumanClip, PhysicalizedClip, RobotClip, Skeleton
 from pipeline.dataset.objects import (
     episode_column,
     object_column,
@@ -89,10 +89,12 @@ def _common(clips, attr: str, what: str):
     return ref
 
 
-def _source_frames(T: int, start, ratio: float = 1.0) -> np.ndarray:
-    """Source frame of each of ``T`` frames, ``start + round(t ratio)`` (``ratio``: source fps / clip fps,
-    for a clip resampled from its source)."""
-    return int(start or 0) + np.round(np.arange(T) * ratio).astype(np.int64)
+def _source_frames(T: int, start, ratio: float = 1.0, prefix: int = 0) -> np.ndarray:
+    """Source frame of each of ``T`` frames, ``start + round((t - prefix) ratio)`` (``ratio``: source fps / clip fps,
+    for a clip resampled from its source), -1 over a synthetic start prefix of ``prefix`` frames (no source frame:
+    :mod:`physicalize.start`)."""
+    t = np.arange(T) - int(prefix)
+    return np.where(t < 0, -1, int(start or 0) + np.round(np.maximum(t, 0) * ratio).astype(np.int64))
 
 
 _SOURCE_FRAME = Feature("source_frame", "int64", ("source_frame",), "frame index in the source motion")
@@ -136,7 +138,9 @@ def robot_clips_to_episodes(
         obj_data, obj_meta = object_data(c, with_contact)
         data.update(obj_data)
         ratio = float(c.provenance.get("source_fps", fps)) / fps
-        data["source_frame"] = _source_frames(c.frames, c.provenance.get("source_frame_start"), ratio)
+        data["source_frame"] = _source_frames(
+            c.frames, c.provenance.get("source_frame_start"), ratio, c.provenance.get(START_PREFIX_KEY, 0)
+        )
         meta = {
             "kind": "robot",
             "source": c.source,
