@@ -131,10 +131,12 @@ bench-retarget: install
 bench-physicalize: install
 	$(PY) bench/bench_physicalize.py
 
-# Real mocap: every clip of FOLDERS (default: ../shared/mocap interact, omomo, intermimic), valid / rejected / failed.
+# Real mocap: every clip of FOLDERS (default: ../shared/mocap interact, omomo, intermimic), valid / rejected / failed,
+# per kind of take and per object; BENCH_ARGS=--sensitivity adds the physics ranges' low and high ends.
 FOLDERS ?=
+BENCH_ARGS ?=
 bench-physicalize-real: install
-	$(PY) bench/bench_physicalize_real.py $(FOLDERS) -j $(JOBS)
+	$(PY) bench/bench_physicalize_real.py $(FOLDERS) -j $(JOBS) $(BENCH_ARGS)
 
 bench-train: install
 	$(PY) bench/bench_train.py --name $(NAME)

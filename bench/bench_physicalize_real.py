@@ -1,25 +1,33 @@
 """Physicalize on real human-object mocap: every clip of the given folders (default: ``../shared/mocap``'s
 ``interact/``, ``omomo/`` and ``intermimic/``), retargeted then physicalized as ``make retarget physicalize``
-does, one table row each:
+does, one table row each, with the take's kind (:func:`pipeline.take.take_kind`, from the object's own
+reference track: ``slide``, ``lift``, ``overhead`` or ``small move``, with the object's rise and travel [m]) and
+its verdict:
 
 * ``valid``;
 * ``rejected: <class>``: the reference asks what the robot cannot do, decided before tracking
-  (:mod:`physicalize.feasibility`), with the figure that proves it;
+  (:mod:`physicalize.feasibility`), with the figure that proves it (printed whole);
 * ``failed: <class>``: tracked and invalid (:func:`physicalize.validate.failure_class`): fell before the
   first contact (approach or locomotion), fell at contact (the first second of it), fell while holding,
   object lost, joint limits, penetration, foot sliding, tracking error, or error (an exception).
 
-Each row also says how the hands hold the object where the human lifts it with both hands (object 3 cm above its
-first height, both human wrists touching it): ``opp`` is the mean of ``n_l . n_r`` (the object's outward surface
-normals nearest each wrist: -1 opposite sides) for the human's wrists and for the retargeted G1's, ``human/G1``
-(``-``: no such frames): a retargeting that turns a squeeze into a one-sided hold starts a grasp physics cannot keep.
+Each row also says how the hands hold the object where the human holds it with both hands, lifted or not (each
+hand labelled in contact or within 2 cm of the object: :func:`pipeline.take.held_frames`): ``opp`` is the
+mean of ``n_l . n_r`` (the object's outward surface normals nearest each wrist: -1 opposite sides) for the human's
+wrists and for the retargeted G1's, ``human/G1`` (``-``: no such frames): a retargeting that turns a squeeze into
+a one-sided hold starts a grasp physics cannot keep.
 
-Then per object kind and over all: valid / rejected / failed counts, ``valid`` over the clips not rejected
-(the issue's bar: >= 0.8), ``rejected`` over all clips (<= 0.25), and the speed of the physicalize pass in
-simulated seconds per CPU-second (>= 2; retargeting is timed apart). Clips run in ``--jobs`` worker processes
-(one clip per process at a time: timings are per core). ``--json`` keeps every clip's figures.
+Then over all, per take kind and per object: valid / rejected / failed counts, ``valid`` over the clips not
+rejected (the issue's bar: >= 0.8), ``rejected`` over all clips (<= 0.35), the speed of the physicalize pass in
+simulated seconds per CPU-second over the clips it tracked to the end (>= 2; retargeting is timed apart), and the
+yield: valid frames (50 Hz, the robot clip's) per core-hour, ``3600 * sum(frames of the valid clips) /
+sum(retarget + physicalize CPU-seconds of every clip)``, rejected and failed ones included (their CPU is spent
+too). Clips run in ``--jobs`` worker processes (one clip per process at a time: timings are per core).
+``--json`` keeps every clip's figures. ``--sensitivity`` adds a row per end of the physics ranges: every take
+again with its objects' mass, hand and floor friction at the low, then at the high end of its kind's ranges
+(:mod:`pipeline.materials`): how much of the result rests on the table's nominal values.
 
-Run: ``make bench-physicalize-real [FOLDERS="a b"] [JOBS=2]``.
+Run: ``make bench-physicalize-real [FOLDERS="a b"] [JOBS=2] [BENCH_ARGS=--sensitivity]``.
 """
 
 from __future__ import annotations
@@ -29,6 +37,8 @@ import json
 import sys
 import time
 from collections import Counter
+from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import torch
@@ -38,11 +48,11 @@ torch.set_num_threads(1)
 import numpy as np  # noqa: E402
 
 from physicalize.clip import physicalize_clip  # noqa: E402
-from pipeline.distance.field import ObjectField  # noqa: E402
-from pipeline.geometry import MeshGeometry  # noqa: E402
+from pipeline.materials import object_physics_for  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
 from pipeline.robot import HAND_BODIES  # noqa: E402
 from pipeline.stage.executor import map_ordered  # noqa: E402
+from pipeline.take import KINDS, held_frames, object_field, take_kind, wrist_normals  # noqa: E402
 from pipeline.terms.link_motion import link_motion  # noqa: E402
 from retarget.clip import retarget_clip  # noqa: E402
 
@@ -56,44 +66,58 @@ def object_kind(path: Path) -> str:
     return parts[1] if len(parts) >= 3 else path.stem
 
 
-def hand_opposition(human, robot) -> tuple[float | None, float | None]:
-    """Mean ``n_l . n_r`` of the human's and the G1's wrists where the human lifts the object with both hands."""
-    if human.contacts is None or not robot.objects:
-        return None, None
+def g1_hand_opposition(human, robot) -> float | None:
+    """Mean ``n_l . n_r`` of the G1's hands over the frames the human holds the object with both hands
+    (:func:`pipeline.take.held_frames`, on the human resampled to the robot's rate); the human's own is the
+    retargeted clip's ``provenance["human_hand_opposition"]`` (:func:`pipeline.take.human_hand_opposition`)."""
+    if not human.objects or not robot.objects:
+        return None
     h = human.resampled(robot.fps)
-    wrists = [h.skeleton.index(n) for n in ("left_wrist", "right_wrist") if n in h.skeleton.joint_names]
-    if len(wrists) < 2:
-        return None, None
-    o_h, o_r = h.objects[0], robot.objects[0]
+    field = object_field(h)  # the robot's object is the human's, placed anew: same geometry
     T = min(h.frames, robot.frames)
-    frames = np.flatnonzero(h.contacts[:T, wrists].all(axis=1) & (o_r.pose[:T, 2] > o_r.pose[0, 2] + 0.03))
+    frames = np.flatnonzero(held_frames(h, field)[:T])
     if not frames.size:
-        return None, None
-    field = ObjectField.from_geometry(
-        o_r.geometry, **({"cache": False} if isinstance(o_r.geometry, MeshGeometry) else {})
-    )
+        return None
     links = link_motion(robot.qpos[frames], np.zeros((len(frames), 35)), HAND_BODIES, robot.source).pos
-    out = []
-    for pts, poses in ((h.joint_pos[frames][:, wrists], o_h.pose[frames]), (links, o_r.pose[frames])):
-        g = np.asarray(field.query_links(pts, poses).grad)
-        out.append(float(np.mean(np.einsum("ti,ti->t", g[:, 0], g[:, 1]))))
-    return out[0], out[1]
+    n = wrist_normals(field, links, robot.objects[0].pose[frames])
+    return float(np.mean(np.einsum("ti,ti->t", n[:, 0], n[:, 1])))
 
 
-def run_clip(path: Path) -> dict:
-    """Retarget and physicalize one clip file; its figures, verdict and timings."""
-    row = {"clip": path.name, "folder": path.parent.name, "object": object_kind(path)}
+def with_physics(human, end: str):
+    """The take with its objects' mass and frictions at ``end`` of their kind's ranges (:mod:`pipeline.materials`)."""
+    if end == "nominal":
+        return human
+    objects = []
+    for o in human.objects:
+        p, _ = object_physics_for(o.name, end)
+        objects.append(replace(o, mass=p.mass, friction=p.friction, floor_friction=p.floor_friction))
+    return replace(human, objects=tuple(objects))
+
+
+def run_clip(path: Path, end: str = "nominal") -> dict:
+    """Retarget and physicalize one clip file, its objects' physics at ``end`` of their ranges; its figures,
+    verdict and timings."""
+    row = {"clip": path.name, "folder": path.parent.name, "object": object_kind(path), "kind": "unread"}
+    stage, c0 = "retarget_cpu_s", time.process_time()
     try:
-        human = read_clips(path)[0]
+        human = with_physics(read_clips(path)[0], end)
+        if human.objects:
+            kind = take_kind(human.objects[0].pose)
+            row.update(kind=kind.kind, rise_m=kind.rise_m, travel_m=kind.travel_m)
+        else:
+            row["kind"] = "no object"
         c0 = time.process_time()
         robot = retarget_clip(human)[0]
         row["retarget_cpu_s"] = time.process_time() - c0
-        row["opposition_human"], row["opposition_g1"] = hand_opposition(human, robot)
-        c0 = time.process_time()
+        row["frames"] = robot.frames
+        row["opposition_human"] = robot.provenance.get("human_hand_opposition")
+        row["opposition_g1"] = g1_hand_opposition(human, robot)
+        stage, c0 = "physicalize_cpu_s", time.process_time()
         _, roll, figures, _ = physicalize_clip(robot)
         row["physicalize_cpu_s"] = time.process_time() - c0
         row["seconds"] = robot.frames / robot.fps
     except Exception as exc:  # noqa: BLE001 - a clip that raises is a row of the table, not the end of the bench
+        row.setdefault(stage, time.process_time() - c0)  # the CPU it spent counts against the yield
         figures = {"valid": False, "reason": f"error: {type(exc).__name__}: {exc}", "failure": "error"}
     row.update(figures)
     row["verdict"] = (
@@ -106,6 +130,13 @@ def run_clip(path: Path) -> dict:
     return row
 
 
+def verdict_line(row: dict) -> str:
+    """``verdict: reason``; a rejection's reason whole (its class and the figure that proves it), others cut to
+    100 characters."""
+    reason = row["reason"].removeprefix(f"{row['verdict']}: ")
+    return f"{row['verdict']}: {reason if row.get('rejected') else reason[:100]}"
+
+
 def clip_files(folders: list[Path]) -> list[Path]:
     files = []
     for folder in folders:
@@ -116,20 +147,40 @@ def clip_files(folders: list[Path]) -> list[Path]:
     return files
 
 
+def valid_frames_per_core_hour(group: list[dict]) -> float:
+    """The yield: ``3600 * sum(frames of the valid clips) / sum(retarget + physicalize CPU-s of every clip)``."""
+    frames = sum(r.get("frames", 0) for r in group if r["valid"])
+    cpu = sum(r.get("retarget_cpu_s", 0.0) + r.get("physicalize_cpu_s", 0.0) for r in group)
+    return 3600.0 * frames / max(cpu, 1e-9)
+
+
+def groups(rows: list[dict]) -> dict[str, list[dict]]:
+    """The rows over all, per take kind (:data:`pipeline.take.KINDS` order, then any other) and per object."""
+    kinds = [k for k in KINDS if any(r["kind"] == k for r in rows)]
+    kinds += sorted({r["kind"] for r in rows} - set(kinds))
+    objects = sorted({r["object"] for r in rows})
+    return {
+        "all": rows,
+        **{f"kind {k}": [r for r in rows if r["kind"] == k] for k in kinds},
+        **{f"object {k}": [r for r in rows if r["object"] == k] for k in objects},
+    }
+
+
 def summary(rows: list[dict]) -> list[str]:
     lines = []
-    groups = {"all": rows, **{k: [r for r in rows if r["object"] == k] for k in sorted({r["object"] for r in rows})}}
-    for name, group in groups.items():
+    for name, group in groups(rows).items():
         n = len(group)
         valid = sum(r["valid"] for r in group)
         rejected = sum(r["verdict"].startswith("rejected") for r in group)
         kept = n - rejected
-        sim = sum(r.get("seconds", 0.0) for r in group)
-        cpu = sum(r.get("physicalize_cpu_s", 0.0) for r in group)
+        ran = [r for r in group if "seconds" in r and not r.get("rejected")]  # tracked to the end (rejected: never)
+        sim = sum(r["seconds"] for r in ran)
+        cpu = sum(r.get("physicalize_cpu_s", 0.0) for r in ran)
         lines.append(
-            f"{name:12s} clips {n:3d}  valid {valid:3d}  rejected {rejected:3d}  failed {kept - valid:3d}  "
+            f"{name:20s} clips {n:3d}  valid {valid:3d}  rejected {rejected:3d}  failed {kept - valid:3d}  "
             f"valid/not-rejected {valid / max(kept, 1):.2f}  rejected/all {rejected / max(n, 1):.2f}  "
-            f"physicalize {sim / max(cpu, 1e-9):.2f}x real time per core"
+            f"physicalize {sim / max(cpu, 1e-9):.2f}x real time per core  "
+            f"yield {valid_frames_per_core_hour(group):.0f} valid frames/core-h"
         )
     causes = Counter(r["verdict"] for r in rows if not r["valid"])
     lines.append("outcomes: " + ", ".join(f"{k} {v}" for k, v in causes.most_common()))
@@ -141,19 +192,34 @@ def main() -> None:
     ap.add_argument("folders", nargs="*", type=Path, default=DEFAULT_FOLDERS)
     ap.add_argument("-j", "--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--json", type=Path, default=None, help="also write every clip's figures here")
+    ap.add_argument(
+        "--sensitivity",
+        action="store_true",
+        help="also run every take with its objects' mass and frictions at the low and at the high end of their ranges",
+    )
     args = ap.parse_args()
     files = clip_files(args.folders)
     t0 = time.perf_counter()
     rows = map_ordered(run_clip, files, jobs=args.jobs, desc="real clips")
-    print(f"{'clip':28s}{'object':12s}{'s':>6s}{'rt/core':>9s}{'opp':>12s}  verdict: reason")
+    print(
+        f"{'clip':28s}{'object':12s}{'kind':11s}{'rise':>6s}{'trav':>6s}{'s':>6s}{'rt/core':>9s}{'opp':>12s}"
+        "  verdict: reason"
+    )
     for r in rows:
         rt = r.get("seconds", 0.0) / max(r.get("physicalize_cpu_s", 1e9), 1e-9)
-        reason = r["reason"].removeprefix(f"{r['verdict']}: ")
         opp = "/".join("-" if v is None else f"{v:.2f}" for v in (r.get("opposition_human"), r.get("opposition_g1")))
-        head = f"{r['clip']:28s}{r['object']:12s}{r.get('seconds', 0):6.1f}{rt:9.2f}{opp:>12s}"
-        print(f"{head}  {r['verdict']}: {reason[:100]}")
+        shape = "".join(f"{r[k]:6.2f}" if k in r else f"{'-':>6s}" for k in ("rise_m", "travel_m"))
+        head = f"{r['clip']:28s}{r['object']:12s}{r['kind']:11s}{shape}{r.get('seconds', 0):6.1f}{rt:9.2f}{opp:>12s}"
+        print(f"{head}  {verdict_line(r)}")
     for line in summary(rows):
         print(line)
+    if args.sensitivity:
+        print("sensitivity (pipeline.materials: every take's mass, hand and floor friction at one end of its ranges):")
+        print(f"  {'nominal':8s}" + summary(rows)[0].removeprefix("all").strip())
+        for end in ("low", "high"):
+            at_end = map_ordered(partial(run_clip, end=end), files, jobs=args.jobs, desc=f"real clips, {end}")
+            print(f"  {end:8s}" + summary(at_end)[0].removeprefix("all").strip())
+            rows += [{**r, "physics_end": end} for r in at_end]
     print(f"({len(rows)} clips in {time.perf_counter() - t0:.0f} s wall on {args.jobs} worker processes)")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1, default=float))
