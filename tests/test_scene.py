@@ -11,7 +11,7 @@ from mocap_paths import SHARED_MOCAP, needs_shared
 from pipeline.errors import InputError
 from pipeline.geometry import Chair, MeshGeometry, ObjectPhysics, Primitive
 from pipeline.robot import G1_JOINT_NAMES, actuator_profile
-from pipeline.scene import Scene, SceneObject, build_scene, restitution_damping_ratio
+from pipeline.scene import Scene, SceneObject, build_scene, build_spec, restitution_damping_ratio
 
 
 def _settle(scene: Scene, seconds: float = 1.0) -> mujoco.MjData:
@@ -211,3 +211,38 @@ def test_a_box_pushed_high_tips_before_it_slides():
     assert tilt > 45.0
     travel, tilt = _push_box(0.8, 0.25, 0.6, 0.3)
     assert travel == pytest.approx(0.5 * (0.3 - 0.25) * 9.81, rel=0.1) and tilt < 2.0
+
+
+def _squeeze(mu: float, force_share: float, mass: float = 1.5) -> float:
+    """How far [m] a box (0.3 m cube, ``mass``, hand-contact friction ``mu``) drops in 1 s, squeezed from rest
+    between two capsules (radius 4 cm, the G1's hand size) pressed horizontally onto opposite faces, each with
+    ``force_share`` x the normal force ``N = m g / (2 mu)`` at which friction just carries the weight. The scene's
+    contact model (elliptic cones, impratio 10), the G1 far away."""
+    spec = build_spec([SceneObject("box", Primitive("box", (0.15, 0.15, 0.15)), ObjectPhysics(mass, mu),
+                                   pose=(5, 0, 1.0, 1, 0, 0, 0))])  # fmt: skip
+    for side in (1, -1):
+        body = spec.worldbody.add_body(name=f"pad{side}", pos=[5, side * 0.20, 1.0])
+        body.add_joint(name=f"slide{side}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 1, 0])
+        g = body.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[0.04, 0.05, 0], fromto=[-0.05, 0, 0, 0.05, 0, 0])
+        g.mass = 0.5
+        g.contype = g.conaffinity = 1
+        body.gravcomp = 1.0
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    box = m.body("box").id
+    z0 = d.xpos[box][2]
+    push = force_share * mass * 9.81 / (2 * mu)
+    for _ in range(200):
+        for side in (1, -1):
+            d.qfrc_applied[m.jnt_dofadr[m.joint(f"slide{side}").id]] = -side * push
+        mujoco.mj_step(m, d)
+    return float(z0 - d.xpos[box][2])
+
+
+@pytest.mark.parametrize("mu", [0.5, 0.8])
+def test_a_squeeze_holds_a_box_while_friction_carries_its_weight(mu):
+    """Two hands of normal force N hold a box of mass m while 2 mu N >= m g, and it slips below: the physics the
+    grasp planner's squeeze (physicalize.grasp_force.normal_force) counts on."""
+    assert _squeeze(mu, 1.1) < 0.01  # 10% above: held (the soft contacts settle a few mm)
+    assert _squeeze(mu, 0.9) > 0.2  # 10% short: it slips down between the hands to the floor
