@@ -18,9 +18,10 @@ wrists and for the retargeted G1's, ``human/G1`` (``-``: no such frames): a reta
 a one-sided hold starts a grasp physics cannot keep.
 
 Then over all, per take kind and per object: valid / rejected / failed counts, ``valid`` over the clips not
-rejected (the issue's bar: >= 0.8), ``rejected`` over all clips (<= 0.35), the speed of the physicalize pass in
-simulated seconds per CPU-second over the clips it tracked to the end (>= 2; retargeting is timed apart), and the
-yield: valid frames (50 Hz, the robot clip's) per core-hour, ``3600 * sum(frames of the valid clips) /
+rejected (the bars: >= 0.4 after the world's physics and clean starts, >= 0.8 with the object in the teacher's
+loop), ``rejected`` over all clips (<= 0.35), the speed of the physicalize pass in simulated seconds per CPU-second
+over the clips it tracked to the end (>= 2; retargeting is timed apart), and the yield:
+valid frames (50 Hz, the robot clip's) per core-hour, ``3600 * sum(frames of the valid clips) /
 sum(retarget + physicalize CPU-seconds of every clip)``, rejected and failed ones included (their CPU is spent
 too). Clips run in ``--jobs`` worker processes (one clip per process at a time: timings are per core).
 ``--json`` keeps every clip's figures. ``--sensitivity`` adds a row per end of the physics ranges: every take
