@@ -53,7 +53,7 @@ from pipeline.materials import object_physics_for  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
 from pipeline.robot import HAND_BODIES  # noqa: E402
 from pipeline.stage.executor import map_ordered  # noqa: E402
-from pipeline.take import KINDS, held_frames, object_field, take_kind, wrist_normals  # noqa: E402
+from pipeline.take import KINDS, held_frames, mean_opposition, object_field, take_kind, wrist_normals  # noqa: E402
 from pipeline.terms.link_motion import link_motion  # noqa: E402
 from retarget.clip import retarget_clip  # noqa: E402
 
@@ -80,8 +80,7 @@ def g1_hand_opposition(human, robot) -> float | None:
     if not frames.size:
         return None
     links = link_motion(robot.qpos[frames], np.zeros((len(frames), 35)), HAND_BODIES, robot.source).pos
-    n = wrist_normals(field, links, robot.objects[0].pose[frames])
-    return float(np.mean(np.einsum("ti,ti->t", n[:, 0], n[:, 1])))
+    return mean_opposition(wrist_normals(field, links, robot.objects[0].pose[frames]))
 
 
 def with_physics(human, end: str):

@@ -47,7 +47,7 @@ from physicalize.grasp import GraspSchedule, hand_labels
 from physicalize.grasp_config import GraspConfig
 from physicalize.grasp_force import floor_friction
 from physicalize.hand_reach import ObjectTracks, hand_reach
-from pipeline.take import SLIDE, SMALL_MOVE
+from pipeline.take import SLIDE, SMALL_MOVE, mean_opposition
 
 GRAVITY = 9.81
 RESTING_M = 0.01  # an object whose lowest point is this close to the floor rests on it
@@ -179,8 +179,7 @@ def grasp_opposition(grasp: GraspSchedule | None) -> float | None:
     """Mean ``n_l . n_r`` of the reference grasp's inward normals over the frames both hands hold (None: none)."""
     if grasp is None or not grasp.grasped.all(axis=1).any():
         return None
-    n = grasp.normal[grasp.grasped.all(axis=1)]
-    return float(np.mean(np.einsum("ti,ti->t", n[:, 0], n[:, 1])))
+    return mean_opposition(grasp.normal[grasp.grasped.all(axis=1)])
 
 
 def is_squeeze(figures: dict) -> bool:

@@ -28,13 +28,12 @@ from __future__ import annotations
 from dataclasses import replace
 
 import mink
-import mujoco
 import numpy as np
 
-from physicalize.reference import place_on_floor
+from physicalize.reference import build_reference, place_on_floor
 from pipeline.clip import START_PREFIX_KEY, RobotClip
 from pipeline.kinematics import qvel_from_qpos
-from pipeline.robot import FOOT_BODIES, NQ_ROBOT, g1_model, sole_corners
+from pipeline.robot import FOOT_BODIES, g1_model, sole_corners
 from pipeline.rotations import slerp_wxyz, yaw_quat
 
 SETTLE_S = 0.5  # s: the stance held still
@@ -57,16 +56,8 @@ def starts_clean(clip: RobotClip) -> bool:
 
 def _swing_feet(q: np.ndarray) -> list[int]:
     """The feet (0 left, 1 right) of pose ``q`` with a sole corner above :data:`SWING_M`."""
-    model = g1_model()
-    d = mujoco.MjData(model)
-    d.qpos[:NQ_ROBOT] = q
-    mujoco.mj_kinematics(model, d)
-    return [k for k, b in enumerate(FOOT_BODIES) if _sole_heights(model, d, b).max() > SWING_M]
-
-
-def _sole_heights(model: mujoco.MjModel, d: mujoco.MjData, body: str) -> np.ndarray:
-    b = model.body(body).id
-    return (d.xpos[b] + sole_corners(model, body) @ d.xmat[b].reshape(3, 3).T)[:, 2]
+    corners = build_reference(g1_model(), q[None], 50.0).corners[0]  # (2, 4, 3) sole corners
+    return [k for k in range(2) if corners[k, :, 2].max() > SWING_M]
 
 
 def _yaw_quat(quat: np.ndarray) -> np.ndarray:

@@ -126,5 +126,10 @@ def human_hand_opposition(human: HumanClip, index: int = 0) -> float | None:
     if not frames.size:
         return None
     wrists = human.joint_pos[frames][:, [human.skeleton.index("left_wrist"), human.skeleton.index("right_wrist")]]
-    n = wrist_normals(field, wrists, human.objects[index].pose[frames])
-    return float(np.mean(np.einsum("ti,ti->t", n[:, 0], n[:, 1])))
+    return mean_opposition(wrist_normals(field, wrists, human.objects[index].pose[frames]))
+
+
+def mean_opposition(normals: np.ndarray) -> float:
+    """The mean over frames of ``n_l . n_r`` for (T, 2, 3) left and right hand normals: -1 opposite faces (a
+    squeeze), +1 one face (a push)."""
+    return float(np.mean(np.einsum("ti,ti->t", normals[:, 0], normals[:, 1])))

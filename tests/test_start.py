@@ -3,29 +3,21 @@ support that blends into its first frame; its own frames are kept as they were, 
 
 from dataclasses import replace
 
-import mujoco
 import numpy as np
 import pytest
 
 from physicalize.clip import physicalize_clip
+from physicalize.reference import build_reference
 from physicalize.start import BLEND_S, MOVING_MPS, SETTLE_S, clean_start, prefix_frames, starts_clean
 from pipeline.kinematics import qvel_from_qpos
-from pipeline.robot import FOOT_BODIES, NQ_ROBOT, g1_model, sole_corners
+from pipeline.robot import g1_model
 from pipeline.synthetic import default_clips
 from retarget.clip import retarget_clip
 
 
 def _sole_heights(q: np.ndarray) -> np.ndarray:
     """(2, 4) each foot's sole-corner heights at pose ``q``."""
-    model = g1_model()
-    d = mujoco.MjData(model)
-    d.qpos[:NQ_ROBOT] = q
-    mujoco.mj_kinematics(model, d)
-    out = []
-    for body in FOOT_BODIES:
-        b = model.body(body).id
-        out.append((d.xpos[b] + sole_corners(model, body) @ d.xmat[b].reshape(3, 3).T)[:, 2])
-    return np.array(out)
+    return build_reference(g1_model(), q[None], 50.0).corners[0, :, :, 2]
 
 
 @pytest.fixture(scope="module")
