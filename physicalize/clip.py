@@ -162,7 +162,8 @@ def physicalize_clip(
     The base teacher tries the QP gain sets ``gains`` (default :data:`physicalize.wbc_config.TEACHER_GAINS`) in
     order from the same initial state and keeps the first rollout that is valid, else the first set's:
     rejection sampling over controller gains, each rollout validated on its own. ``figures`` name the set
-    kept (``teacher_gains``, its index) and how many ran (``teacher_attempts``); timings count them all.
+    kept (``teacher_gains``, its index) and how many ran (``teacher_attempts``); timings count them all. The
+    object loop's sets run only on a clip whose hands hold something (else they are the open loop's sets again).
     A residual teacher runs the first set only (its policy was trained on it)."""
     spec = parse_teacher(teacher)
     residual = None if spec.checkpoint is None else load_residual(str(spec.checkpoint), spec.digest)
@@ -175,23 +176,23 @@ def physicalize_clip(
     ref_figures = _reference_figures(scene, ref, clip)
     if (rejected := rejection(ref_figures[0])) is not None:
         return None, None, _rejected(ref_figures[0], rejected), {}
+    holds = ref.grasp is not None and bool(ref.grasp.grasped.any())
     tried = []
-    for config in gains:
+    for index, config in enumerate(gains):
+        if config.object_loop is not None and not holds:  # nothing held: the same controller as an open-loop set
+            continue
         t0, cpu0 = time.perf_counter(), time.process_time()
         controller = WholeBodyController(scene.model, scene.profile, config)
         roll = simulate(
             scene, ref, controller, qpos0, qvel0, contact_links=clip.contact_links, perturb=perturb, residual=residual
         )
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
-        tried.append((roll, _figures(scene, roll, clip, objects, qpos0, qvel0, perturb, ref_figures)))
-        if tried[-1][1]["valid"]:
+        tried.append((index, roll, _figures(scene, roll, clip, objects, qpos0, qvel0, perturb, ref_figures)))
+        if tried[-1][2]["valid"]:
             break
-    kept = len(tried) - 1 if tried[-1][1]["valid"] else 0
-    roll, figures = tried[kept]
+    kept, roll, figures = tried[-1] if tried[-1][2]["valid"] else tried[0]
     if not figures["valid"] and len(tried) > 1:
-        figures["reason"] += "".join(
-            f"; gain set {k}: {f['reason'].split(';')[0]}" for k, (_, f) in enumerate(tried[1:], 1)
-        )
+        figures["reason"] += "".join(f"; gain set {k}: {f['reason'].split(';')[0]}" for k, _, f in tried[1:])
     figures["teacher_gains"], figures["teacher_attempts"] = kept, len(tried)
     figures["start_prefix_s"] = prefix_frames(clip) / clip.fps
     roll.seconds = wall

@@ -35,16 +35,17 @@ track this module plans, per control frame ``t`` and hand ``k``:
   the object far enough for friction to carry the rest (squeezing) or pushing it from one side; ramped in by
   ``s(t)``; ``friction_ok`` records whether the plan is within the hands' friction cones.
 
-The controller (:class:`physicalize.wbc.WholeBodyController`) adds ``-J_k^T f_k`` (the object's
-reaction at the hand point) to the measured external generalized force ``tau_ext`` -- so the QP's
-floating-base rows and torques carry the object's weight and inertia while the reference lifts it;
-with :attr:`GraspConfig.replace_measured` it first removes the measured contact forces of the held
-object on that whole forearm (:data:`physicalize.wbc.GRIP_LINKS`), whose one-step-old compensation
-would otherwise act as an integrator on the squeeze: a blocked hand is pushed by the last contact
-force plus ``M qdd*`` more at every step (measured: the box was dropped; the wrist capsules,
-compensated, pressed 30 N on its top edge and turned it). Contacts of other links stay measured.
-Optionally (:attr:`GraspConfig.w_hold_rot`) the grasping hands also track their reference
-orientation. Holding also needs the scene's elliptic friction cones with ``impratio`` 10
+The controller (:class:`physicalize.wbc.WholeBodyController`) either puts the held object in its QP
+(:mod:`physicalize.object_loop`: the hand targets carried onto the measured object pose, the forces its own
+variables) or, in the open loop, adds ``-J_k^T f_k`` (the object's planned reaction at the hand point) to the
+measured external generalized force ``tau_ext`` after removing the measured contact forces of the held object
+on that whole forearm (:data:`physicalize.wbc.GRIP_LINKS`), whose one-step-old compensation would otherwise act
+as an integrator on the squeeze: a blocked hand is pushed by the last contact force plus ``M qdd*`` more at every
+step (measured: the box was dropped; the wrist capsules, compensated, pressed 30 N on its top edge and turned
+it). Contacts of other links stay measured. Squeezing hands also track their reference orientation
+(:attr:`GraspConfig.w_hold_rot`). The schedule gives the controller the held object's reference motion
+(:class:`physicalize.object_motion.ObjectMotion`) and both frictions (:class:`physicalize.object_loop.HeldObject`).
+Holding also needs the scene's elliptic friction cones with ``impratio`` 10
 (:mod:`pipeline.scene`): with pyramidal cones and ``impratio`` 1 a squeezed box crept down 2-3 cm/s.
 """
 
@@ -56,8 +57,10 @@ import mujoco
 import numpy as np
 
 from physicalize.grasp_config import GraspConfig
-from physicalize.grasp_force import ObjectLoad, hand_force, hand_friction
+from physicalize.grasp_force import ObjectLoad, floor_friction, hand_force, hand_friction
 from physicalize.hand_reach import HandReach, ObjectTracks, hand_geoms, hand_offsets, hand_reach
+from physicalize.object_loop import HeldObject
+from physicalize.object_motion import ObjectMotion
 from physicalize.target import Target
 from pipeline.foot_contact import keep_runs, label_runs, runs, widen_runs
 from pipeline.robot import HAND_BODIES
@@ -84,12 +87,12 @@ class GraspSchedule:
     rot: np.ndarray  # (T, 2, 3, 3) reference hand orientations
     rot_weight: np.ndarray  # (T, 2) hand orientation task weight (0 when not grasping)
     mu: float
-    replace_measured: bool = True
     # (T, 2, 3) the tracked hand point without the squeeze (on the object's track / kept off it)
     attached: np.ndarray | None = None
-    hold_ref: np.ndarray | None = None  # (T, 2, 3) reference position of the object each hand holds (0 when none)
     # (T, 2) bool: the hand's target is moved off an object it does not touch in the reference
     clear: np.ndarray | None = None
+    motions: dict[int, ObjectMotion] | None = None  # index of each held object -> its reference motion
+    support_mu: dict[int, float] | None = None  # index of each held object -> its object-support friction
 
     def hand_body_targets(self) -> np.ndarray:
         """(T, 2, 3) hand body origins that put the tracked points on :attr:`attached` at the reference hand
@@ -100,10 +103,12 @@ class GraspSchedule:
         """Set ``target``'s hand fields to frame ``t`` of the schedule (in place; returned)."""
         target.hand_pos, target.hand_vel, target.hand_acc = self.point[t], self.vel[t], self.acc[t]
         target.hand_offset, target.hand_weight, target.hand_force = self.offset, self.weight[t], self.force[t]
-        target.hand_object = self.body[t] if self.replace_measured else np.full(2, -1)
         target.hand_rot, target.hand_rot_weight = self.rot[t], self.rot_weight[t]
-        if self.hold_ref is not None:
-            target.hand_hold_body, target.hand_hold_ref = self.body[t], self.hold_ref[t]
+        i = int(self.obj[t])
+        if i >= 0 and self.motions is not None:
+            target.held = HeldObject(
+                int(self.body[t].max()), self.body[t] >= 0, self.motions[i], t, self.mu, self.support_mu[i]
+            )
         return target
 
 
@@ -167,7 +172,9 @@ def grasp_schedule(
     acc = np.gradient(vel, dt, axis=0) if T > 2 else np.zeros_like(point)
     mu = _hold_friction(m, holds, objs)
     force, friction_ok = _forces(m, holds, objs, normal, s, mu, ref.fps, cfg)
-    body, hold_ref = _held_bodies(holds, objs, T)
+    body = _held_bodies(holds, objs, T)
+    indices = sorted(set(holds.key[held].tolist()))
+    motions = {i: ObjectMotion.of(objs.pose(i)[:T], m.body_ipos[objs.bodies[i]], ref.fps) for i in indices}
     return GraspSchedule(
         hand_offsets(m),
         point,
@@ -183,10 +190,10 @@ def grasp_schedule(
         near.rot,
         s * cfg.w_hold_rot * holds.opposed[:, None],
         float(mu) if np.isfinite(mu) else 0.0,
-        cfg.replace_measured,
         attached,
-        hold_ref,
         clear,
+        motions,
+        {i: floor_friction(m, objs.geoms[i]) for i in indices},
     )
 
 
@@ -241,10 +248,11 @@ def _on_object_tracks(
         for a, b, i in label_runs(holds.key[:, k]):
             pose = objs.pose(i)
             t0, c_o, n_o = _anchor(m, near, holds.opposed, objs.bodies[i], pose, k, a, b, cfg)
+            g0 = near.dist[t0, k]
             for t in range(a, b):
                 R = quat_mat(pose[t, 3:7])
                 normal[t, k] = R @ n_o
-                gap[t, k] = near.dist[t0, k]
+                gap[t, k] = g0
                 point[t, k] = (1 - s[t, k]) * near.point[t, k] + s[t, k] * (pose[t, :3] + R @ c_o)
     for t in np.flatnonzero(holds.opposed):  # squeezes that cancel: exactly opposite normals
         n = normal[t, 0] - normal[t, 1]
@@ -338,15 +346,13 @@ def _forces(
     return force, friction_ok
 
 
-def _held_bodies(holds: _Holds, objs: ObjectTracks, T: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(body (T, 2), hold_ref (T, 2, 3))``: the body id of the object each hand holds (-1 none) and that
-    object's reference position (0 none)."""
-    body, hold_ref = np.full((T, 2), -1), np.zeros((T, 2, 3))
+def _held_bodies(holds: _Holds, objs: ObjectTracks, T: int) -> np.ndarray:
+    """(T, 2) the body id of the object each hand holds (-1 none)."""
+    body = np.full((T, 2), -1)
     for k in range(2):
         for a, b, i in label_runs(holds.key[:, k]):
             body[a:b, k] = objs.bodies[i]
-            hold_ref[a:b, k] = objs.pose(i)[a:b, :3]
-    return body, hold_ref
+    return body
 
 
 def _pushed(pose: np.ndarray, cfg: GraspConfig) -> bool:

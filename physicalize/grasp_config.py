@@ -24,7 +24,6 @@ class GraspConfig:
     # hand orientation task weight while squeezing an object between the hands (omomo box: 0 -> 20 kept it in the grip,
     # obj err 0.247 -> 0.066 m)
     w_hold_rot: float = 20.0
-    replace_measured: bool = True
     slide_speed: float = 0.05  # m/s: a sliding object's floor friction is ramped in up to this reference speed
     push_travel: float = 0.10  # m: a one-hand contact holds only an object the reference slides this far (a push)
     max_hand_force: float = 120.0  # N: cap on the force one hand applies

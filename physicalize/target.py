@@ -9,6 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from physicalize.object_loop import HeldObject
+
 
 @dataclass
 class Target:
@@ -33,15 +35,11 @@ class Target:
     hand_vel: np.ndarray | None = None  # (2, 3) target velocity / acceleration of that point
     hand_acc: np.ndarray | None = None
     hand_weight: np.ndarray | None = None  # (2,) task weight per hand
-    hand_force: np.ndarray | None = None  # (2, 3) force each hand applies to a held object (world)
-    # (2,) body id whose measured contacts with that forearm and hand hand_force replaces, -1 none
-    hand_object: np.ndarray | None = None
     hand_rot: np.ndarray | None = None  # (2, 3, 3) hand orientations, tracked with weights hand_rot_weight (2,)
     hand_rot_weight: np.ndarray | None = None
-    hand_hold_body: np.ndarray | None = None  # (2,) body id of the object each hand holds, -1 none
+    hand_force: np.ndarray | None = None  # (2, 3) the planned force each hand applies to a held object (the open loop)
+    held: HeldObject | None = None  # the object the hands hold, in the QP's loop (physicalize.object_loop)
     seated: bool = False  # a seat carries the body: the QP holds its contacts (physicalize.seat)
-    # (2, 3) that object's reference position: its lag beyond hand_lead moves the hand target along
-    hand_hold_ref: np.ndarray | None = None
 
 
 @dataclass

@@ -13,16 +13,25 @@ sole corners of each stance foot and, while seated, at the seat's support points
 
 ``M`` and ``h = qfrc_bias - qfrc_passive`` come from the simulation's own model (so the held
 object's inertia is not in ``M``, but its measured contact forces on the robot are in
-``tau_ext``: the object is a free body moved only by contact). Tasks ``a_i*`` are PD laws with
-feed-forward: centre of mass, pelvis and torso orientation, swing-foot poses, hand positions and a
-posture from the reference. Stance feet hold still with a damping term and are turned back flat
-(``a_foot* = -k_v v - k_p [0; roll/pitch error]``), which keeps a foot from rolling onto its edge.
-Hand tasks track a point of each hand (``Target.hand_offset``) with per-hand weights and, while a hand
-holds an object (:mod:`physicalize.grasp`), the planned force ``f_k`` it applies enters as the
-reaction ``-J_k^T f_k`` in ``tau_ext`` in place of that object's measured contacts on the forearm; a held
-object that lags its reference position by ``e`` with ``|e| > hand_lead`` moves the hand target by
-``e (1 - hand_lead/|e|)`` (the hands stay on the object and push it back with a bounded PD force instead
-of running ahead and pushing the robot off its feet).
+``tau_ext``: the object is a free body moved only by contact; the object loop below adds its own
+rows). Tasks ``a_i*`` are PD laws with feed-forward: centre of mass, pelvis and torso orientation, swing-foot
+poses, hand positions and a posture from the reference. Stance feet hold still with a damping term and are
+turned back flat (``a_foot* = -k_v v - k_p [0; roll/pitch error]``), which keeps a foot from rolling onto its edge.
+Hand tasks track a point of each hand (``Target.hand_offset``) with per-hand weights. A hand that holds an
+object (:mod:`physicalize.grasp`) does so in one of two ways, chosen per gain set (``WBCConfig.object_loop``):
+
+* **the object loop** (:mod:`physicalize.object_loop`): the held object's contact forces (every measured
+  hand-object contact, the support's contacts while the reference rests it) and its acceleration are QP
+  variables, bound by its Newton-Euler equation, with a PD task from its **measured** pose to its reference;
+  the robot feels the hands' forces through ``-J^T f`` in the rows above. A hand in contact moves with the
+  object's material point under it along its face (``w_stick``) and presses along the normal towards its
+  reference point carried onto the measured object pose; that goal is pressed in by the integral of the
+  normal-force error, the QP's force of the last step against the force MuJoCo's soft contact delivered
+  (``press_gain``): the loop closed on the measured contact force.
+* **the open loop**: the force planned offline from the reference track (:mod:`physicalize.grasp_force`) enters
+  as the reaction ``-J_k^T f_k`` in ``tau_ext`` in place of that object's measured contacts on the forearm; a
+  held object that lags its reference position by ``e`` with ``|e| > hand_lead`` moves the hand target by
+  ``e (1 - hand_lead/|e|)`` (the hands stay on the object and push it back with a bounded PD force).
 
 Support comes from the schedule corrected by the simulation's contacts, and the swing foot lands
 where the divergent component of motion ``xi = c + c_dot / omega`` can be caught
@@ -45,6 +54,7 @@ from qpsolvers import solve_qp
 
 from physicalize import seat, wbc_rows
 from physicalize.contacts import ContactSets, robot_contacts
+from physicalize.object_loop import ObjectLoop, contact_frame
 from physicalize.seat import SupportPoint
 from physicalize.stepping import Stepping
 from physicalize.target import Solution, Target
@@ -116,6 +126,7 @@ class WholeBodyController:
         self.q_lo, self.q_hi = model.jnt_range[[model.joint(j).id for j in G1_JOINT_NAMES]].T.copy()
         self._M = np.zeros((model.nv, model.nv))
         self.stepping = Stepping(CONTROL_DT)  # capture-point shift of each foot's last landing (controller state)
+        self._press = np.zeros(2)  # each holding hand's goal pressed into the object (the contact force loop)
 
     # --- kinematics helpers ---------------------------------------------------------------------
     def _jac(self, d, body: int, point: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -167,19 +178,30 @@ class WholeBodyController:
         qd = d.qvel[:nv]
         mujoco.mj_fullM(self.m, d, self._M)
         M, h = self._M[:nv, :nv], d.qfrc_bias[:nv] - d.qfrc_passive[:nv]
-        cost = Costs(nv, 12 * len(stance) + 3 * len(seats))
+        loop = None
+        if target.held is not None and cfg.object_loop is not None:
+            loop = ObjectLoop.measure(self.m, d, target.held, self.grip_geoms, self.floor)
+        nf_robot = 12 * len(stance) + 3 * len(seats)
+        cost = Costs(nv, nf_robot + (loop.nf if loop is not None else 0))
         self._com_task(cost, target, com)
         self._orientation_tasks(cost, d, target, qd)
         feet = self._foot_tasks(cost, d, target, qd)
-        tau_ext = self._hand_tasks(cost, d, target, qd, tau_ext)
+        tau_ext = self._hand_tasks(cost, d, target, qd, tau_ext, loop, nv + nf_robot)
         self._posture_task(cost, d, target, qd)
         cost.regularize(cfg.w_qdd, cfg.w_force)
         Jc = self._contact_jacobians(cost, d, stance, seats, qd)
+        if loop is not None:
+            Jc = np.vstack([Jc, loop.robot_jacobians(self.m, d)])
+            for Ao, bo, wo in loop.tasks(nv + nf_robot, cost.n, cfg.object_loop):
+                cost.rows(Ao, bo, wo)
         A, b = equality_rows(M, h, tau_ext, Jc, [feet[k] for k in stance], cost.nf)
         G, hv = friction_rows([UP_FRAME] * (4 * len(stance)) + [sp.frame for sp in seats], cfg.mu, nv, cost.n)
         if seats and cfg.seated_foot_load > 0:  # seated, each stance foot still carries a share of the weight
             Gf, hf = seated_load_rows(len(stance), nv, cost.n, cfg.seated_foot_load * self.robot_mass * 9.81)
             G, hv = G + [Gf], hv + [hf]
+        if loop is not None:
+            Ao, bo, Go, ho = loop.rows(nv + nf_robot, cost.n, cfg.object_loop)
+            A, b, G, hv = np.vstack([A, Ao]), np.concatenate([b, bo]), G + [Go], hv + [ho]
         Tq, ta = torque_map(M, h, tau_ext, Jc)  # tau = Tq x + ta
         G += [Tq, -Tq]
         hv += [cfg.effort_scale * self.effort - ta, cfg.effort_scale * self.effort + ta]
@@ -188,7 +210,8 @@ class WholeBodyController:
         x = solve_qp(P, q, G, hv, A, b, solver="daqp")
         ok = x is not None
         x = x[: cost.n] if ok else self._fallback(d, target, cost.n)
-        qdd, f = x[:nv], x[nv:]
+        self._remember_press(loop, x, nv + nf_robot, ok)
+        qdd, f = x[:nv], x[nv : nv + nf_robot]
         tau = np.clip(Tq @ x + ta, -self.effort, self.effort)
         return Solution(qdd, f.reshape(-1, 3), tau, self.action(d, qdd, tau), ok)
 
@@ -246,43 +269,70 @@ class WholeBodyController:
                 cost.task(J6, a - b6, cfg.w_swing)
         return stance_rows
 
-    def _hand_tasks(self, cost: Costs, d, target: Target, qd: np.ndarray, tau_ext: np.ndarray) -> np.ndarray:
-        """Hand point (and orientation) tasks; returns ``tau_ext`` with each holding hand's planned reaction
-        ``-J^T f`` in place of the held object's measured contacts on that forearm."""
+    def _hand_tasks(
+        self, cost: Costs, d, target: Target, qd: np.ndarray, tau_ext: np.ndarray, loop: ObjectLoop | None, col0: int
+    ) -> np.ndarray:
+        """Hand point (and orientation) tasks; returns ``tau_ext`` without the held object's measured contacts on
+        the forearms whose forces are the loop's variables (:mod:`physicalize.object_loop`). A holding hand's goal
+        is its reference point carried to the measured object pose and pressed along the contact's inward normal
+        by :attr:`_press`; in contact, its task moves it with the object's material point under it."""
         if target.hand_pos is None:
             return tau_ext
         cfg, z3 = self.cfg, np.zeros((2, 3))
         off = z3 if target.hand_offset is None else target.hand_offset
         hv = z3 if target.hand_vel is None else target.hand_vel
         ha = z3 if target.hand_acc is None else target.hand_acc
+        touching = {} if loop is None else {hc.k: hc for hc in loop.hands}
         for k in range(2):
             hb = self.hands[k]
             p = d.xpos[hb] + d.xmat[hb].reshape(3, 3) @ off[k]
             Jp, Jr, bp, br = self._jac(d, hb, p)
-            goal, kp, kd = self._hand_goal(d, target, k)
-            a = ha[k] + kp * (goal - p) + kd * (hv[k] - Jp @ qd)
-            cost.task(Jp, a - bp, cfg.w_hand if target.hand_weight is None else float(target.hand_weight[k]))
+            w = cfg.w_hand if target.hand_weight is None else float(target.hand_weight[k])
+            holding = target.held is not None and bool(target.held.hands[k])
+            if loop is not None and holding:
+                press = None if k not in touching else self._press[k] * touching[k].normal
+                goal, vel = loop.hand_goal(target.hand_pos[k], target.hand_vel[k], press)
+                a = cfg.hold_kp * (goal - p) + cfg.hold_kd * (vel - Jp @ qd)
+                if k in touching:  # sticks to the object along its face, presses along the normal
+                    Ao, bo = loop.point_rows(p, col0, cost.n)
+                    Ao[:, :NV_ROBOT] -= Jp
+                    E = contact_frame(touching[k].normal)
+                    slip = E[1:] @ (Jp @ qd - loop.point_velocity(p))
+                    rhs = np.r_[E[0] @ a, -cfg.hold_kd * slip]
+                    cost.rows(-E @ Ao, rhs + E @ (bo - bp), [w, cfg.w_stick, cfg.w_stick])
+                    tau_ext = tau_ext - self.external_forces(d, self.grip_geoms[k], target.held.body)
+                cost.task(Jp, ha[k] + a - bp, w)
+            elif holding:  # the open loop: the planned force, the hands on the reference object's track
+                goal = self._led_goal(d, target, k)
+                a = ha[k] + cfg.hold_kp * (goal - p) + cfg.hold_kd * (hv[k] - Jp @ qd)
+                cost.task(Jp, a - bp, w)
+                tau_ext = tau_ext - self.external_forces(d, self.grip_geoms[k], target.held.body)
+                tau_ext = tau_ext - Jp.T @ target.hand_force[k]
+            else:
+                a = ha[k] + cfg.hand_kp * (target.hand_pos[k] - p) + cfg.hand_kd * (hv[k] - Jp @ qd)
+                cost.task(Jp, a - bp, w)
             if target.hand_rot is not None and target.hand_rot_weight[k] > 0:
                 err = orientation_error(target.hand_rot[k], d.xmat[hb].reshape(3, 3))
                 cost.task(Jr, cfg.orient_kp * err - cfg.orient_kd * (Jr @ qd) - br, float(target.hand_rot_weight[k]))
-            if target.hand_force is not None:
-                if target.hand_object is not None and target.hand_object[k] >= 0:
-                    tau_ext = tau_ext - self.external_forces(d, self.grip_geoms[k], int(target.hand_object[k]))
-                tau_ext = tau_ext - Jp.T @ target.hand_force[k]
         return tau_ext
 
-    def _hand_goal(self, d, target: Target, k: int) -> tuple[np.ndarray, float, float]:
-        """``(goal, k_p, k_d)`` of hand ``k``: a holding hand follows a lagging object (pulling it back at most
-        ``hand_lead``) with the holding gains."""
-        cfg, goal = self.cfg, target.hand_pos[k]
-        holding = target.hand_hold_body is not None and target.hand_hold_body[k] >= 0
-        if not holding:
-            return goal, cfg.hand_kp, cfg.hand_kd
-        dev = d.xpos[int(target.hand_hold_body[k])] - target.hand_hold_ref[k]
+    def _remember_press(self, loop: ObjectLoop | None, x: np.ndarray, col0: int, ok: bool) -> None:
+        """Close the loop on the measured contact force (:meth:`ObjectLoop.normal_force_error`): ``_press[k] += k_f
+        e_k dt``, clipped to ``[-press_max, press_max]``; reset for a hand that holds nothing."""
+        held = np.zeros(2, bool) if loop is None else loop.held.hands.astype(bool)
+        if loop is not None and ok:
+            self._press += self.cfg.press_gain * loop.normal_force_error(x, col0) * CONTROL_DT
+        self._press = np.where(held, np.clip(self._press, -self.cfg.press_max, self.cfg.press_max), 0.0)
+
+    def _led_goal(self, d, target: Target, k: int) -> np.ndarray:
+        """The open loop's goal of holding hand ``k``: its reference point, following a held object whose body origin
+        lags its reference by ``e`` beyond ``hand_lead`` by ``e (1 - hand_lead / |e|)`` (pulling it back with a
+        bounded push)."""
+        held = target.held
+        dev = d.xpos[held.body] - held.motion.pos[held.t]
         nd = float(np.linalg.norm(dev))
-        if nd > cfg.hand_lead:
-            goal = goal + dev * (1.0 - cfg.hand_lead / nd)
-        return goal, cfg.hold_kp, cfg.hold_kd
+        goal = target.hand_pos[k]
+        return goal + dev * (1.0 - self.cfg.hand_lead / nd) if nd > self.cfg.hand_lead else goal
 
     def _posture_task(self, cost: Costs, d, target: Target, qd: np.ndarray) -> None:
         """Joint PD towards the reference posture, with its acceleration as feed-forward."""

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from physicalize.object_loop import LoopGains
+
 
 @dataclass(frozen=True)
 class WBCConfig:
@@ -49,9 +51,19 @@ class WBCConfig:
     # zdd >= -a (zd + speed) (physicalize.wbc_rows.soft_rows)
     touchdown_speed: float = 0.8
     touchdown_zone: float = 0.10  # m: sole corners higher than this get no row
-    # m: a held object farther than this from its reference position takes the hand targets along (the rest stays a
-    # bounded push towards the reference)
+    # the held object in the QP (physicalize.object_loop): its gains and weights; None: the open loop (each holding
+    # hand's planned force, physicalize.grasp_force, in place of its measured contacts; hand goals on the reference
+    # object's track, following a lagging object beyond hand_lead)
+    object_loop: LoopGains | None = None
+    # m: the open loop's lead: a held object farther than this from its reference takes the hand goals along
     hand_lead: float = 0.05
+    # m/(N s): a holding hand's goal moves this far into the object per second per newton the simulation's contact
+    # falls short of the QP's normal force (the contact force loop), at most press_max either way
+    press_gain: float = 0.005
+    press_max: float = 0.03
+    # a holding hand in contact moves with the object's point under it along the object's face, with this weight
+    # (moving relative to it, the QP's friction would be free to push the object while the hand slides back)
+    w_stick: float = 1000.0
     # m: legs keep this far from objects (their contact is never planned; 0.01: the OMOMO clip fell at 0.62 s)
     clearance: float = 0.0
     # a [1/s] of the clearance barrier (0: no rows; see physicalize.wbc_rows.clearance_rows)
@@ -75,13 +87,16 @@ class WBCConfig:
 # The base teacher's gain sets, tried in order on a clip until one tracks it validly
 # (physicalize.clip.physicalize_clip):
 # heavier horizontal CoM tasks make posture, orientation and hand tasks yield to balance. Alone, (5000, 5000, 1000)
-# walks
-# 44 of the gait envelope's 50 walks (the first set 32) and the default Carry, but the OMOMO box falls and SitStand
-# seeds
-# break on joint-limit frames: no single set was best on every clip (`make bench-physicalize`).
+# walks 44 of the gait envelope's 50 walks (the first set 32) and the default Carry, but the OMOMO box falls and
+# SitStand seeds break on joint-limit frames: no single set was best on every clip (`make bench-physicalize`).
+# The open loop's sets come first, then the object loop's (physicalize.object_loop): alone, the loop lost the
+# default Carry's box in the walk (the wrists at their 5 N m and the waist at 95% of its effort while lifting);
+# after them it rescues what they fail (a box shoved mid-push: tests/test_object_loop.py), and every clip the open
+# loop made valid stays as it was, bit for bit.
 TEACHER_GAINS: tuple[WBCConfig, ...] = (
     WBCConfig(),
     WBCConfig(w_com=(5000.0, 5000.0, 1000.0)),
     WBCConfig(w_com=(5000.0, 5000.0, 500.0)),
     WBCConfig(w_com=(10000.0, 10000.0, 1000.0)),
+    WBCConfig(object_loop=LoopGains()),
 )

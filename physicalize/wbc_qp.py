@@ -34,6 +34,12 @@ class Costs:
         P[:nv, :nv] += J.T @ (w * J)
         q[:nv] -= J.T @ (w[:, 0] * b)
 
+    def rows(self, A: np.ndarray, b: np.ndarray, w) -> None:
+        """Add ``||A x - b||^2_W`` over the whole ``x`` (``A`` (k, n)): the tasks of the held object's loop."""
+        w = np.broadcast_to(np.asarray(w, dtype=float), b.shape)[:, None]
+        self.P += A.T @ (w * A)
+        self.q -= A.T @ (w[:, 0] * b)
+
     def regularize(self, w_qdd: float, w_force: float) -> None:
         """Add ``w_qdd ||qdd||^2 + w_force ||f||^2``."""
         nv = self.nv
