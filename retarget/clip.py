@@ -14,6 +14,7 @@ from pipeline.errors import InputError
 from pipeline.scene import SceneObject, build_scene
 from pipeline.take import human_hand_opposition
 from retarget.contact import link_contact_flags
+from retarget.grip import SQUEEZE, anchored_targets, g1_opposition, squeezed_frames
 from retarget.ik import G1Retargeter
 from retarget.mapping import load_mapping
 from retarget.metrics import DEFAULT_LINK_MAP, retarget_metrics
@@ -50,6 +51,12 @@ def retarget_clip(
     scene = build_scene([SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in objects])
     ik = G1Retargeter(scene)
     qpos = ik.retarget(targets, {o.name: o.pose for o in objects}, source=human.source)
+    squeeze = squeezed_frames(human) if objects else None
+    opposition = None if squeeze is None else g1_opposition(human, qpos, objects, squeeze)
+    if opposition is not None and opposition > SQUEEZE:  # the human squeezes it, the scaled G1 does not
+        targets = anchored_targets(human, targets, objects, squeeze)
+        ik = G1Retargeter(scene)
+        qpos = ik.retarget(targets, {o.name: o.pose for o in objects}, source=human.source)
     objects = tuple(replace(o, pose=ik.objects_pose[o.name]) for o in objects)  # moved clear of planted feet
     robot = RobotClip(
         qpos,
@@ -67,6 +74,8 @@ def retarget_clip(
             "source_fps": clip.fps,
             # the human's grasp (pipeline.take): -1 a squeeze between opposite faces; physicalize's feasibility reads it
             "human_hand_opposition": human_hand_opposition(human),
+            # the G1's before its wrists were anchored on the human's faces (retarget.grip), None: not anchored
+            "g1_hand_opposition_scaled": opposition if opposition is not None and opposition > SQUEEZE else None,
         },
     )
     seconds = time.perf_counter() - t0

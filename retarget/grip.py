@@ -1,0 +1,74 @@
+"""Two-handed squeezes kept on the faces the human squeezes.
+
+The scaled pose decides where on the object a hand lands (:mod:`retarget.contact` only closes the gap), and a G1
+scaled from a human holding a box between its palms can end with a hand on the box's top (measured on a held-out
+OMOMO lift: the human's wrists at ``n_l . n_r = -1.00``, the G1's at 0.07). Where the human squeezes an object
+(:func:`pipeline.take.human_hand_opposition` <= :data:`SQUEEZE`) and the retargeted G1 does not
+(:func:`g1_opposition` over the same frames > :data:`SQUEEZE`), :func:`anchored_targets` moves the G1's wrist
+targets onto the human's wrists as they sit in the object's frame, carried to the robot's object pose,
+
+``p_G1(t) = c_r(t) + R_r(t) R_h(t)^T (p_h(t) - c_h(t))``   (``c``, ``R``: the object's pose, human ``h`` / robot ``r``),
+
+blended in and out over :data:`RAMP` frames around the held frames, and the clip is solved again: the object keeps
+its real size in both worlds, so the same faces are the same points. Where the G1 cannot reach them, the IK's
+residual shows it and physicalize's ``out of reach`` class says so with its distance."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from pipeline.clip import HumanClip, ObjectTrack
+from pipeline.robot import HAND_BODIES
+from pipeline.rotations import quat_mat
+from pipeline.take import held_frames, mean_opposition, object_field, wrist_normals
+from pipeline.terms.link_motion import link_motion
+from retarget.targets import IKTargets
+
+SQUEEZE = -0.5  # n_l . n_r at or below this: the hands hold the object between them
+RAMP = 10  # frames over which the anchored wrist targets blend in and out
+WRISTS = ("left_wrist", "right_wrist")
+
+
+def g1_opposition(human: HumanClip, qpos: np.ndarray, objects: tuple[ObjectTrack, ...], frames: np.ndarray) -> float:
+    """Mean ``n_l . n_r`` of the G1's hands (``qpos`` (T, 36)) on ``frames`` against the robot's object 0."""
+    field = object_field(human)  # the robot's object is the human's, placed anew: the same geometry
+    links = link_motion(qpos[frames], np.zeros((len(frames), 35)), HAND_BODIES, human.source).pos
+    return mean_opposition(wrist_normals(field, links, objects[0].pose[frames]))
+
+
+def squeezed_frames(human: HumanClip) -> np.ndarray | None:
+    """The frames the human holds object 0 with both hands, if it squeezes it between them there (their mean
+    opposition <= :data:`SQUEEZE`); None otherwise (no object, no wrists, a push, a lift from below)."""
+    names = human.skeleton.joint_names
+    if not human.objects or not all(w in names for w in WRISTS):
+        return None
+    field = object_field(human)
+    frames = np.flatnonzero(held_frames(human, field))
+    if not frames.size:
+        return None
+    wrists = human.joint_pos[frames][:, [human.skeleton.index(w) for w in WRISTS]]
+    opposition = mean_opposition(wrist_normals(field, wrists, human.objects[0].pose[frames]))
+    return frames if opposition <= SQUEEZE else None
+
+
+def anchored_targets(
+    human: HumanClip, targets: IKTargets, objects: tuple[ObjectTrack, ...], frames: np.ndarray
+) -> IKTargets:
+    """``targets`` with the G1's wrist targets on the human's wrists carried from the human's object pose to the
+    robot's (module docstring), weight 1 on ``frames`` falling to 0 over :data:`RAMP` frames around them."""
+    held = np.zeros(targets.frames, bool)
+    held[frames[frames < targets.frames]] = True
+    weight = np.clip(1.0 - distance_transform_edt(~held) / (RAMP + 1), 0.0, 1.0)
+    h_pose, r_pose = human.objects[0].pose, objects[0].pose
+    pos = targets.pos.copy()
+    for side, wrist in zip(("left", "right"), WRISTS):
+        k = targets.body_names.index(f"{side}_wrist_yaw_link")
+        p_h = human.joint_pos[:, human.skeleton.index(wrist)]
+        for t in np.flatnonzero(weight > 0):
+            local = quat_mat(h_pose[t, 3:7]).T @ (p_h[t] - h_pose[t, :3])
+            carried = r_pose[t, :3] + quat_mat(r_pose[t, 3:7]) @ local
+            pos[t, k] = (1 - weight[t]) * pos[t, k] + weight[t] * carried
+    return replace(targets, pos=pos)
