@@ -93,6 +93,7 @@ class GraspSchedule:
     clear: np.ndarray | None = None
     motions: dict[int, ObjectMotion] | None = None  # index of each held object -> its reference motion
     support_mu: dict[int, float] | None = None  # index of each held object -> its object-support friction
+    squeezed: np.ndarray | None = None  # (T,) bool: both hands squeeze the held object between them
 
     def hand_body_targets(self) -> np.ndarray:
         """(T, 2, 3) hand body origins that put the tracked points on :attr:`attached` at the reference hand
@@ -106,8 +107,9 @@ class GraspSchedule:
         target.hand_rot, target.hand_rot_weight = self.rot[t], self.rot_weight[t]
         i = int(self.obj[t])
         if i >= 0 and self.motions is not None:
+            squeezed = self.squeezed is not None and bool(self.squeezed[t])
             target.held = HeldObject(
-                int(self.body[t].max()), self.body[t] >= 0, self.motions[i], t, self.mu, self.support_mu[i]
+                int(self.body[t].max()), self.body[t] >= 0, self.motions[i], t, self.mu, self.support_mu[i], squeezed
             )
         return target
 
@@ -194,6 +196,7 @@ def grasp_schedule(
         clear,
         motions,
         {i: floor_friction(m, objs.geoms[i]) for i in indices},
+        holds.opposed.copy(),
     )
 
 
@@ -219,8 +222,14 @@ def hand_labels(contact_links: tuple[str, ...], contacts: np.ndarray | None, T: 
 def _holds(labels: np.ndarray, near: HandReach, objs: ObjectTracks, cfg: GraspConfig) -> _Holds:
     """A labelled hand within ``max_gap`` of its nearest object holds it (runs shorter than ``min_run``
     dropped); both hands on one object facing each other across it squeeze it; one hand alone holds only an
-    object the reference pushes along its support (:func:`_pushed`)."""
-    held = labels & (near.dist < cfg.max_gap)
+    object the reference pushes along its support (:func:`_pushed`). While the reference carries an object off its
+    support, a hand within ``max_gap`` of the object the other (labelled) hand holds holds it too: no G1 hand lifts
+    anything alone, and a human's contact labels flicker from hand to hand (sub2_woodchair_000: the chair raised
+    overhead with both hands 1-8 cm from it, labelled one hand at a time, was never held and fell)."""
+    near_held = labels & (near.dist < cfg.max_gap)
+    partner = near_held[:, ::-1] & (near.dist < cfg.max_gap) & (near.obj == near.obj[:, ::-1])
+    carried = np.array([0 <= i and _off_support(objs.pose(int(i)), t, cfg) for t, i in enumerate(near.obj.max(axis=1))])
+    held = near_held | (partner & carried[:, None])
     both = held.all(axis=1) & (near.obj[:, 0] == near.obj[:, 1])
     opposed = both & (np.einsum("ti,ti->t", near.normal[:, 0], near.normal[:, 1]) <= -cfg.min_opposition)
     key = np.where(held, near.obj, -1)
@@ -353,6 +362,12 @@ def _held_bodies(holds: _Holds, objs: ObjectTracks, T: int) -> np.ndarray:
         for a, b, i in label_runs(holds.key[:, k]):
             body[a:b, k] = objs.bodies[i]
     return body
+
+
+def _off_support(pose: np.ndarray, t: int, cfg: GraspConfig) -> bool:
+    """The reference raises the object (track ``pose`` (T, 7)) more than ``lift_blend`` above its lowest at frame
+    ``t``."""
+    return bool(pose[t, 2] - pose[:, 2].min() > cfg.lift_blend)
 
 
 def _pushed(pose: np.ndarray, cfg: GraspConfig) -> bool:

@@ -56,7 +56,7 @@ UP = np.array([0.0, 0.0, 1.0])
 class HeldObject:
     """What the controller is told at one step about the object the hands hold: its ``body``, which
     ``hands`` (2,) hold it, its reference motion at frame ``t`` of ``motion``, the hand-object and
-    object-support frictions."""
+    object-support frictions, and whether the hands squeeze it between them (:mod:`physicalize.grasp`)."""
 
     body: int
     hands: np.ndarray
@@ -64,6 +64,7 @@ class HeldObject:
     t: int
     mu_hand: float
     mu_support: float
+    squeezed: bool = False
 
 
 @dataclass(frozen=True)
@@ -78,10 +79,13 @@ class LoopGains:
     w_object_rot: float = 100.0
     w_support: float = 1000.0
     max_normal: float = 120.0  # N: a hand's contact point presses at most this hard
-    # the hands' friction pyramids use mu / friction_margin and each hand in contact presses at least min_normal:
-    # a grip at the QP's least force slips at the first disturbance (the default Carry lost its box at 3.4 s)
-    friction_margin: float = 1.0
-    min_normal: float = 0.0
+    # hands squeezing the object between them (HeldObject.squeezed) use mu / friction_margin in their pyramids and
+    # press at least min_normal each: a grip at the QP's least force slips at the first disturbance (OMOMO's
+    # sub3_largebox_003 dropped its box 30 cm at 5 s with 1.0 and 0 N, held it to the end with 2.0 and 15 N); a
+    # push keeps the plain cone and no least force (the shoved default Push fell at 7.1 s with the margin, and its
+    # box ran 30 cm ahead of its track with the least force)
+    friction_margin: float = 2.0
+    min_normal: float = 15.0
 
 
 def _skew(r: np.ndarray) -> np.ndarray:
@@ -276,7 +280,7 @@ class ObjectLoop:
                 self.mass * GRAVITY + self.other[:3], self.other[3:] - np.cross(self.omega, self.inertia @ self.omega)
             ]
         )
-        mu_h = self.held.mu_hand / g.friction_margin / np.sqrt(2.0)
+        mu_h = self.held.mu_hand / (g.friction_margin if self.held.squeezed else 1.0) / np.sqrt(2.0)
         for j, gp in enumerate(self.grips):
             fn, t1, t2 = contact_frame(gp.normal)
             rows = np.zeros((6, n))
@@ -290,7 +294,7 @@ class ObjectLoop:
             ]
             G.append(rows)
             h.append(np.r_[np.zeros(5), g.max_normal])
-        for hc in self.hands:  # each hand in contact squeezes at least min_normal
+        for hc in self.hands if self.held.squeezed else ():  # squeezing hands press at least min_normal each
             least = np.zeros((1, n))
             for j in hc.grips:
                 least[0, col0 + 3 * j : col0 + 3 * j + 3] = -self.grips[j].normal
