@@ -231,8 +231,12 @@ def test_without_hand_contacts_nothing_is_held_and_the_hands_are_kept_off(scene)
         assert gap < 0.02 and np.linalg.norm(g.point[t, k] - centre) == pytest.approx(cfg.clearance - gap, abs=0.005)
         assert abs(g.point[t, k, 1]) > abs(centre[1])  # moved outward, away from the box's side
     one = contacts.copy()
-    one[:, 2] = False  # one hand alone does not lift a box (it only pushes one along the floor)
-    assert not grasp_schedule(scene, ref, LINKS, one, {"box": box}, cfg).grasped.any()
+    one[:, 2] = False  # one labelled hand alone does not lift a box (it only pushes one along its support) ...
+    g = grasp_schedule(scene, ref, LINKS, one, {"box": box}, cfg)
+    lifted = box[:, 2] - box[:, 2].min() > cfg.lift_blend
+    assert not g.grasped[~lifted].any()
+    # ... but while the reference carries it, the unlabelled hand 1 cm off it holds it with the labelled one
+    assert g.grasped[lifted].all() and (g.body[lifted] >= 0).all()
 
 
 def _track_box(scene, qpos, box, contacts, cfg: GraspConfig | None = GraspConfig(), wbc: WBCConfig = WBCConfig()):
