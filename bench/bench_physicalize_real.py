@@ -51,11 +51,10 @@ import numpy as np  # noqa: E402
 from physicalize.clip import physicalize_clip  # noqa: E402
 from pipeline.materials import object_physics_for  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
-from pipeline.robot import HAND_BODIES  # noqa: E402
 from pipeline.stage.executor import map_ordered  # noqa: E402
-from pipeline.take import KINDS, held_frames, mean_opposition, object_field, take_kind, wrist_normals  # noqa: E402
-from pipeline.terms.link_motion import link_motion  # noqa: E402
+from pipeline.take import KINDS, held_frames, object_field, take_kind  # noqa: E402
 from retarget.clip import retarget_clip  # noqa: E402
+from retarget.grip import g1_opposition  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
 DEFAULT_FOLDERS = [SHARED / "interact", SHARED / "omomo", SHARED / "intermimic"]
@@ -69,18 +68,17 @@ def object_kind(path: Path) -> str:
 
 def g1_hand_opposition(human, robot) -> float | None:
     """Mean ``n_l . n_r`` of the G1's hands over the frames the human holds the object with both hands
-    (:func:`pipeline.take.held_frames`, on the human resampled to the robot's rate); the human's own is the
-    retargeted clip's ``provenance["human_hand_opposition"]`` (:func:`pipeline.take.human_hand_opposition`)."""
+    (:func:`pipeline.take.held_frames`, on the human resampled to the robot's rate;
+    :func:`retarget.grip.g1_opposition`); the human's own is the retargeted clip's
+    ``provenance["human_hand_opposition"]`` (:func:`pipeline.take.human_hold`)."""
     if not human.objects or not robot.objects:
         return None
     h = human.resampled(robot.fps)
     field = object_field(h)  # the robot's object is the human's, placed anew: same geometry
-    T = min(h.frames, robot.frames)
-    frames = np.flatnonzero(held_frames(h, field)[:T])
+    frames = np.flatnonzero(held_frames(h, field)[: robot.frames])
     if not frames.size:
         return None
-    links = link_motion(robot.qpos[frames], np.zeros((len(frames), 35)), HAND_BODIES, robot.source).pos
-    return mean_opposition(wrist_normals(field, links, robot.objects[0].pose[frames]))
+    return g1_opposition(field, robot.qpos, robot.objects, frames, robot.source)
 
 
 def with_physics(human, end: str):

@@ -32,7 +32,7 @@ cannot keep is the retargeting's failure, tracked and reported as such, not the 
   of the hands and motors is the grasp plan's, not the take's, and a plan that asks too much fails in the
   simulation with its class;
 * a **squeeze**: the human's wrists on opposite faces, ``n_l . n_r`` < :data:`SQUEEZE_OPPOSITION` over the
-  frames both hands hold (``provenance["human_hand_opposition"]``, :func:`pipeline.take.human_hand_opposition`;
+  frames both hands hold (``provenance["human_hand_opposition"]``, :func:`pipeline.take.human_hold`;
   for a G1 motion with no human, the reference grasp's own normals): two opposed hands' normal forces cancel and
   their friction carries the weight.
 """

@@ -228,7 +228,8 @@ def _holds(labels: np.ndarray, near: HandReach, objs: ObjectTracks, cfg: GraspCo
     overhead with both hands 1-8 cm from it, labelled one hand at a time, was never held and fell)."""
     near_held = labels & (near.dist < cfg.max_gap)
     partner = near_held[:, ::-1] & (near.dist < cfg.max_gap) & (near.obj == near.obj[:, ::-1])
-    carried = np.array([0 <= i and _off_support(objs.pose(int(i)), t, cfg) for t, i in enumerate(near.obj.max(axis=1))])
+    lifted = [objs.pose(i)[:, 2] - objs.pose(i)[:, 2].min() > cfg.lift_blend for i in range(len(objs.names))]
+    carried = np.array([i >= 0 and bool(lifted[i][t]) for t, i in enumerate(near.obj.max(axis=1).tolist())])
     held = near_held | (partner & carried[:, None])
     both = held.all(axis=1) & (near.obj[:, 0] == near.obj[:, 1])
     opposed = both & (np.einsum("ti,ti->t", near.normal[:, 0], near.normal[:, 1]) <= -cfg.min_opposition)
@@ -362,12 +363,6 @@ def _held_bodies(holds: _Holds, objs: ObjectTracks, T: int) -> np.ndarray:
         for a, b, i in label_runs(holds.key[:, k]):
             body[a:b, k] = objs.bodies[i]
     return body
-
-
-def _off_support(pose: np.ndarray, t: int, cfg: GraspConfig) -> bool:
-    """The reference raises the object (track ``pose`` (T, 7)) more than ``lift_blend`` above its lowest at frame
-    ``t``."""
-    return bool(pose[t, 2] - pose[:, 2].min() > cfg.lift_blend)
 
 
 def _pushed(pose: np.ndarray, cfg: GraspConfig) -> bool:

@@ -4,10 +4,10 @@ control step, built from the simulation by :meth:`ObjectLoop.measure`).
 
 Appended to the QP's ``x = (qdd, f)`` after the robot's own contact forces:
 
-* ``f_h`` (3 per hand touching the held object): the hand's force **on the object** at the hand's measured
-  contact point ``p_h`` (the force-weighted mean of its contacts) and inward normal ``n_h``; friction pyramid
-  of the hand-object friction, ``0 <= f_h.n_h <= N_max``. The robot feels ``-f_h``: its contact Jacobian rows
-  are ``-J_h``, so the floating base and the torques carry the object through the hands.
+* ``f_h`` (3 per measured contact of a holding hand's forearm or hand with the object): that contact's force
+  **on the object** at its point ``p_h`` and inward normal ``n_h``; friction pyramid of the hand-object friction
+  (:func:`physicalize.wbc_qp.friction_rows`), ``0 <= f_h.n_h <= N_max``. The robot feels ``-f_h``: its contact
+  Jacobian rows are ``-J_h``, so the floating base and the torques carry the object through the hands.
 * ``f_s`` (3 per measured object-support contact, while the reference rests the object there): the support's
   force, normal up, ``f_s.n >= 0``; a friction pyramid where the reference keeps the object still; where it
   slides, kinetic friction against the contact point's motion, ``f_s,t = -mu f_s,n u`` (``u``: the point's
@@ -45,11 +45,11 @@ import mujoco
 import numpy as np
 
 from physicalize.object_motion import SLIDE_SPEED, ObjectMotion
+from physicalize.wbc_qp import UP_FRAME, friction_rows
 from pipeline.robot import NV_ROBOT
 from pipeline.rotations import orientation_error
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
-UP = np.array([0.0, 0.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -280,40 +280,30 @@ class ObjectLoop:
                 self.mass * GRAVITY + self.other[:3], self.other[3:] - np.cross(self.omega, self.inertia @ self.omega)
             ]
         )
-        mu_h = self.held.mu_hand / (g.friction_margin if self.held.squeezed else 1.0) / np.sqrt(2.0)
-        for j, gp in enumerate(self.grips):
-            fn, t1, t2 = contact_frame(gp.normal)
-            rows = np.zeros((6, n))
-            rows[:, col0 + 3 * j : col0 + 3 * j + 3] = [
-                t1 - mu_h * fn,
-                -t1 - mu_h * fn,
-                t2 - mu_h * fn,
-                -t2 - mu_h * fn,
-                -fn,
-                fn,
-            ]
-            G.append(rows)
-            h.append(np.r_[np.zeros(5), g.max_normal])
+        margin = g.friction_margin if self.held.squeezed else 1.0
+        Gf, hf = friction_rows([contact_frame(gp.normal) for gp in self.grips], self.held.mu_hand / margin, col0, n)
+        G, h = G + Gf, h + hf
+        for j, gp in enumerate(self.grips):  # each contact presses at most max_normal
+            most = np.zeros((1, n))
+            most[0, col0 + 3 * j : col0 + 3 * j + 3] = gp.normal
+            G.append(most)
+            h.append(np.array([g.max_normal]))
         for hc in self.hands if self.held.squeezed else ():  # squeezing hands press at least min_normal each
             least = np.zeros((1, n))
             for j in hc.grips:
                 least[0, col0 + 3 * j : col0 + 3 * j + 3] = -self.grips[j].normal
             G.append(least)
             h.append(np.array([-g.min_normal]))
-        mu_s = self.held.mu_support
-        for i in range(len(self.support)):
-            c = col0 + 3 * (len(self.grips) + i)
-            if self.sliding is None:
-                rows = np.zeros((5, n))
-                fn, t1, t2 = contact_frame(UP)
-                ms = mu_s / np.sqrt(2.0)
-                rows[:, c : c + 3] = [t1 - ms * fn, -t1 - ms * fn, t2 - ms * fn, -t2 - ms * fn, -fn]
-                G.append(rows)
-                h.append(np.zeros(5))
-            else:
+        col_s = col0 + 3 * len(self.grips)
+        if self.sliding is None:  # sticking: the support's friction pyramids
+            Gs, hs = friction_rows([UP_FRAME] * len(self.support), self.held.mu_support, col_s, n)
+            G, h = G + Gs, h + hs
+        else:  # sliding: kinetic friction against the motion, f_t = -mu_s f_n u, f_n >= 0
+            for i in range(len(self.support)):
+                c = col_s + 3 * i
                 eq = np.zeros((2, n))
                 eq[0, c], eq[1, c + 1] = 1.0, 1.0
-                eq[:, c + 2] = mu_s * self.sliding[:2]
+                eq[:, c + 2] = self.held.mu_support * self.sliding[:2]
                 A.append(eq)
                 b.append(np.zeros(2))
                 nonneg = np.zeros((1, n))

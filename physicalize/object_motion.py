@@ -5,11 +5,11 @@ reference implies (resting on its support, sliding on it).
 
 Velocities are central differences of the track (``np.gradient``); the angular velocity is
 ``w_t = log(R_{t+1} R_{t-1}^T) / (2 dt)`` (one-sided at the ends), its acceleration the gradient of that.
-A frame *rests* while the reference centre of mass is less than :data:`LIFT` above its lowest
-(on its support) and not rising faster than :data:`RISE_SPEED` (the support then carries the part of the
-weight the hands do not); it *slides*
-while resting and moving faster than :data:`SLIDE_SPEED` horizontally (the support's friction then opposes
-the motion at full strength, ``mu f_n``, the kinetic friction of MuJoCo's soft contacts)."""
+A frame *rests* while the reference centre of mass is less than :data:`LIFT` above its lowest (on its support)
+and not rising faster than :data:`RISE_SPEED` (the support then carries the part of the weight the hands do
+not); it *slides* while resting and moving faster than :data:`SLIDE_SPEED` horizontally (the support's
+friction then opposes the motion at full strength, ``mu f_n``, the kinetic friction of MuJoCo's soft
+contacts)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ import numpy as np
 
 from pipeline.rotations import orientation_error, quat_mat
 
-LIFT = 0.02  # m: a reference centre of mass this far above where the hold began is carried, not resting
+LIFT = 0.02  # m: a reference centre of mass this far above its lowest is carried, not resting
 SLIDE_SPEED = 0.02  # m/s: a resting reference moving faster than this slides on its support
 # m/s: a reference rising faster than this is being lifted, not resting (else the QP's support rows hold the object
 # down through the first LIFT of a lift: the default PickUp's box lagged 13 cm and met the knees)

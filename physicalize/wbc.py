@@ -273,9 +273,11 @@ class WholeBodyController:
         self, cost: Costs, d, target: Target, qd: np.ndarray, tau_ext: np.ndarray, loop: ObjectLoop | None, col0: int
     ) -> np.ndarray:
         """Hand point (and orientation) tasks; returns ``tau_ext`` without the held object's measured contacts on
-        the forearms whose forces are the loop's variables (:mod:`physicalize.object_loop`). A holding hand's goal
-        is its reference point carried to the measured object pose and pressed along the contact's inward normal
-        by :attr:`_press`; in contact, its task moves it with the object's material point under it."""
+        the holding forearms (their forces are the loop's variables, or the open loop's planned reaction
+        ``-J^T f``). In the loop a holding hand's goal is its reference point carried to the measured object pose
+        and pressed along the contact's inward normal by :attr:`_press`; in contact, rows move it with the object's
+        material point under it (the normal row repeats the goal's PD, which the hand's own task also holds: the
+        weighting the measurements were taken with). In the open loop its goal is :meth:`_led_goal`."""
         if target.hand_pos is None:
             return tau_ext
         cfg, z3 = self.cfg, np.zeros((2, 3))

@@ -91,8 +91,8 @@ class WBCConfig:
 # SitStand seeds break on joint-limit frames: no single set was best on every clip (`make bench-physicalize`).
 # The open loop's sets come first, then the object loop's (physicalize.object_loop): alone, the loop lost the
 # default Carry's box in the walk (the wrists at their 5 N m and the waist at 95% of its effort while lifting);
-# after them it rescues what they fail (a box shoved mid-push: tests/test_object_loop.py), and every clip the open
-# loop made valid stays as it was, bit for bit.
+# after them it rescues what they fail (OMOMO's squeezed box lift sub3_largebox_003; a box shoved mid-push:
+# tests/test_object_loop.py), and every clip the open loop made valid stays as it was, bit for bit.
 TEACHER_GAINS: tuple[WBCConfig, ...] = (
     WBCConfig(),
     WBCConfig(w_com=(5000.0, 5000.0, 1000.0)),

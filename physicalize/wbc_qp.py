@@ -62,16 +62,18 @@ def equality_rows(
     return np.vstack([np.hstack([M[:6], -Jc[:, :6].T])] + A), np.concatenate([-h[:6] + tau_ext[:6]] + b)
 
 
-def friction_rows(frames: list[np.ndarray], mu: float, nv: int, n: int) -> tuple[list, list]:
+def friction_rows(frames: list[np.ndarray], mu: float, col0: int, n: int) -> tuple[list, list]:
     """``([G], [h])`` (empty without contact points): per contact point ``j`` with frame rows ``(n, t1, t2)``
-    (normal into the robot first), ``|f_j.t_i| <= mu/sqrt 2 f_j.n`` (the pyramid inscribed in the cone:
-    ``|f_t| <= mu f_n`` in every direction) and ``f_j.n >= 0``, as 5 rows ``G x <= 0``."""
+    (the normal into the body the force acts on first: the robot for its soles and seat, the held object for the
+    hands, :mod:`physicalize.object_loop`) and its force in columns ``col0 + 3 j``, ``|f_j.t_i| <= mu/sqrt 2 f_j.n``
+    (the pyramid inscribed in the cone: ``|f_t| <= mu f_n`` in every direction) and ``f_j.n >= 0``, as 5 rows
+    ``G x <= 0``."""
     if not frames:
         return [], []
     mu = mu / np.sqrt(2.0)
     G = np.zeros((5 * len(frames), n))
     for j, (fn, t1, t2) in enumerate(frames):
-        G[5 * j : 5 * j + 5, nv + 3 * j : nv + 3 * j + 3] = [
+        G[5 * j : 5 * j + 5, col0 + 3 * j : col0 + 3 * j + 3] = [
             t1 - mu * fn,
             -t1 - mu * fn,
             t2 - mu * fn,

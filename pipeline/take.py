@@ -115,18 +115,20 @@ def wrist_normals(field: ObjectField, wrists: np.ndarray, pose: np.ndarray) -> n
     return np.asarray(field.query_links(wrists, pose).grad)
 
 
-def human_hand_opposition(human: HumanClip, index: int = 0) -> float | None:
-    """The mean of ``n_l . n_r`` over the take's :func:`held_frames` (the outward surface normals nearest the left
-    and the right wrist: -1 on opposite faces, a squeeze; +1 on one face, a push): None without such frames."""
+def human_hold(human: HumanClip, index: int = 0, field: ObjectField | None = None) -> tuple[np.ndarray, float] | None:
+    """``(frames, opposition)``: the take's :func:`held_frames` (indices) and the mean of ``n_l . n_r`` over them (the
+    outward surface normals nearest the left and the right wrist: -1 on opposite faces, a squeeze; +1 on one face,
+    a push); None without such frames, the object or either wrist. ``field``: the object's :func:`object_field`
+    when already built."""
     names = human.skeleton.joint_names
     if len(human.objects) <= index or "left_wrist" not in names or "right_wrist" not in names:
         return None
-    field = object_field(human, index)
+    field = object_field(human, index) if field is None else field
     frames = np.flatnonzero(held_frames(human, field, index))
     if not frames.size:
         return None
     wrists = human.joint_pos[frames][:, [human.skeleton.index("left_wrist"), human.skeleton.index("right_wrist")]]
-    return mean_opposition(wrist_normals(field, wrists, human.objects[index].pose[frames]))
+    return frames, mean_opposition(wrist_normals(field, wrists, human.objects[index].pose[frames]))
 
 
 def mean_opposition(normals: np.ndarray) -> float:

@@ -12,9 +12,9 @@ from dataclasses import replace
 from pipeline.clip import HumanClip, RobotClip
 from pipeline.errors import InputError
 from pipeline.scene import SceneObject, build_scene
-from pipeline.take import human_hand_opposition
+from pipeline.take import human_hold, object_field
 from retarget.contact import link_contact_flags
-from retarget.grip import SQUEEZE, anchored_targets, g1_opposition, squeezed_frames
+from retarget.grip import SQUEEZE, anchored_targets, g1_opposition
 from retarget.ik import G1Retargeter
 from retarget.mapping import load_mapping
 from retarget.metrics import DEFAULT_LINK_MAP, retarget_metrics
@@ -51,8 +51,10 @@ def retarget_clip(
     scene = build_scene([SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in objects])
     ik = G1Retargeter(scene)
     qpos = ik.retarget(targets, {o.name: o.pose for o in objects}, source=human.source)
-    squeeze = squeezed_frames(human) if objects else None
-    opposition = None if squeeze is None else g1_opposition(human, qpos, objects, squeeze)
+    field = object_field(human) if objects else None  # the object's distance field, for the hands' faces
+    hold = None if field is None else human_hold(human, field=field)
+    squeeze = hold[0] if hold is not None and hold[1] <= SQUEEZE else None
+    opposition = None if squeeze is None else g1_opposition(field, qpos, objects, squeeze, human.source)
     if opposition is not None and opposition > SQUEEZE:  # the human squeezes it, the scaled G1 does not
         targets = anchored_targets(human, targets, objects, squeeze)
         ik = G1Retargeter(scene)
@@ -73,7 +75,7 @@ def retarget_clip(
             "mapping": mapping.name,
             "source_fps": clip.fps,
             # the human's grasp (pipeline.take): -1 a squeeze between opposite faces; physicalize's feasibility reads it
-            "human_hand_opposition": human_hand_opposition(human),
+            "human_hand_opposition": None if hold is None else hold[1],
             # the G1's before its wrists were anchored on the human's faces (retarget.grip), None: not anchored
             "g1_hand_opposition_scaled": opposition if opposition is not None and opposition > SQUEEZE else None,
         },

@@ -3,7 +3,7 @@
 The scaled pose decides where on the object a hand lands (:mod:`retarget.contact` only closes the gap), and a G1
 scaled from a human holding a box between its palms can end with a hand on the box's top (measured on a held-out
 OMOMO lift: the human's wrists at ``n_l . n_r = -1.00``, the G1's at 0.07). Where the human squeezes an object
-(:func:`pipeline.take.human_hand_opposition` <= :data:`SQUEEZE`) and the retargeted G1 does not
+(:func:`pipeline.take.human_hold`'s opposition <= :data:`SQUEEZE`) and the retargeted G1 does not
 (:func:`g1_opposition` over the same frames > :data:`SQUEEZE`), :func:`anchored_targets` moves the G1's wrist
 targets onto the human's wrists as they sit in the object's frame, carried to the robot's object pose,
 
@@ -21,37 +21,25 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from pipeline.clip import HumanClip, ObjectTrack
+from pipeline.distance.field import ObjectField
 from pipeline.robot import HAND_BODIES
 from pipeline.rotations import quat_mat
-from pipeline.take import held_frames, mean_opposition, object_field, wrist_normals
+from pipeline.take import mean_opposition, wrist_normals
 from pipeline.terms.link_motion import link_motion
 from retarget.targets import IKTargets
 
 SQUEEZE = -0.5  # n_l . n_r at or below this: the hands hold the object between them
 RAMP = 10  # frames over which the anchored wrist targets blend in and out
-WRISTS = ("left_wrist", "right_wrist")
+WRISTS = ("left_wrist", "right_wrist")  # the human's joints the G1's wrist targets are anchored on
 
 
-def g1_opposition(human: HumanClip, qpos: np.ndarray, objects: tuple[ObjectTrack, ...], frames: np.ndarray) -> float:
-    """Mean ``n_l . n_r`` of the G1's hands (``qpos`` (T, 36)) on ``frames`` against the robot's object 0."""
-    field = object_field(human)  # the robot's object is the human's, placed anew: the same geometry
-    links = link_motion(qpos[frames], np.zeros((len(frames), 35)), HAND_BODIES, human.source).pos
+def g1_opposition(
+    field: ObjectField, qpos: np.ndarray, objects: tuple[ObjectTrack, ...], frames: np.ndarray, source: str
+) -> float:
+    """Mean ``n_l . n_r`` of the G1's hands (``qpos`` (T, 36)) on ``frames`` against the robot's object 0, whose
+    distance field is ``field`` (the human's object's: the robot's is the same geometry, placed anew)."""
+    links = link_motion(qpos[frames], np.zeros((len(frames), 35)), HAND_BODIES, source).pos
     return mean_opposition(wrist_normals(field, links, objects[0].pose[frames]))
-
-
-def squeezed_frames(human: HumanClip) -> np.ndarray | None:
-    """The frames the human holds object 0 with both hands, if it squeezes it between them there (their mean
-    opposition <= :data:`SQUEEZE`); None otherwise (no object, no wrists, a push, a lift from below)."""
-    names = human.skeleton.joint_names
-    if not human.objects or not all(w in names for w in WRISTS):
-        return None
-    field = object_field(human)
-    frames = np.flatnonzero(held_frames(human, field))
-    if not frames.size:
-        return None
-    wrists = human.joint_pos[frames][:, [human.skeleton.index(w) for w in WRISTS]]
-    opposition = mean_opposition(wrist_normals(field, wrists, human.objects[0].pose[frames]))
-    return frames if opposition <= SQUEEZE else None
 
 
 def anchored_targets(

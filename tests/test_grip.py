@@ -8,13 +8,11 @@ import numpy as np
 import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 
-from pipeline.robot import HAND_BODIES
 from pipeline.rotations import quat_mat
 from pipeline.synthetic import default_clips
-from pipeline.take import held_frames, mean_opposition, object_field, wrist_normals
-from pipeline.terms.link_motion import link_motion
+from pipeline.take import held_frames, human_hold, object_field
 from retarget.clip import FPS, retarget_clip
-from retarget.grip import RAMP, SQUEEZE, anchored_targets, squeezed_frames
+from retarget.grip import RAMP, SQUEEZE, anchored_targets, g1_opposition
 from retarget.mapping import load_mapping
 from retarget.objects import map_objects
 from retarget.scaling import compute_scale, human_to_targets
@@ -30,8 +28,7 @@ def _pickup(size_factor=(1.0, 1.0, 1.0)):
 def _g1_opposition(human, robot) -> float:
     field = object_field(human)
     frames = np.flatnonzero(held_frames(human, field)[: robot.frames])
-    hands = link_motion(robot.qpos[frames], np.zeros((len(frames), 35)), HAND_BODIES, robot.source).pos
-    return mean_opposition(wrist_normals(field, hands, robot.objects[0].pose[frames]))
+    return g1_opposition(field, robot.qpos, robot.objects, frames, robot.source)
 
 
 def test_anchored_wrists_sit_in_the_objects_frame_where_the_humans_do():
@@ -40,8 +37,9 @@ def test_anchored_wrists_sit_in_the_objects_frame_where_the_humans_do():
     info = compute_scale(human, mapping)
     targets = human_to_targets(human, mapping, scale=info)
     objects = map_objects(human, info, targets)
-    frames = squeezed_frames(human)
-    assert frames is not None and frames.size > 20  # the synthetic PickUp squeezes its box
+    hold = human_hold(human)
+    assert hold is not None and hold[1] <= SQUEEZE and hold[0].size > 20  # the synthetic PickUp squeezes its box
+    frames = hold[0]
     anchored = anchored_targets(human, targets, objects, frames)
     k = targets.body_names.index("left_wrist_yaw_link")
     wrist = human.joint_pos[:, human.skeleton.index("left_wrist")]
