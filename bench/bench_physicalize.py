@@ -40,6 +40,7 @@ torch.set_num_threads(1)
 
 import numpy as np  # noqa: E402
 
+from ingest.default_input import default_clips  # noqa: E402
 from physicalize.clip import physicalize_clip  # noqa: E402
 from physicalize.problem import REFERENCES  # noqa: E402
 from physicalize.residual import train_residual  # noqa: E402
@@ -47,7 +48,6 @@ from physicalize.rollout import initial_state, simulate  # noqa: E402
 from physicalize.synthetic_gait import gait_reference, walk_with_turn  # noqa: E402
 from physicalize.wbc import WholeBodyController  # noqa: E402
 from physicalize.wbc_config import TEACHER_GAINS  # noqa: E402
-from pipeline.default_input import default_clips  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
 from pipeline.scene import build_scene  # noqa: E402
 from retarget.clip import retarget_clip  # noqa: E402

@@ -19,7 +19,7 @@ import torch
 
 torch.set_num_threads(1)
 
-from pipeline.default_input import default_clips  # noqa: E402
+from ingest.default_input import default_clips  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
 from retarget.clip import retarget_clip  # noqa: E402
 from retarget.metrics import evaluate_file  # noqa: E402

@@ -158,8 +158,8 @@ def main() -> None:
     args = ap.parse_args()
     if not (stage_dir(args.name, "features") / "meta" / "info.json").is_file():
         from features.stage import run_stage as features
+        from lessmimic.chain import retarget
         from physicalize.stage import run_stage as physicalize
-        from retarget.stage import run_stage as retarget
 
         os.environ["LESSMIMIC_DATASETS"] = tempfile.mkdtemp()
         retarget(None, args.name)

@@ -49,9 +49,9 @@ def _run_args(p: argparse.ArgumentParser) -> None:
 
 
 def _cmd_retarget(a: argparse.Namespace) -> int:
-    from retarget.stage import run_stage
+    from lessmimic.chain import retarget
 
-    report = run_stage(
+    report = retarget(
         a.input,
         a.name,
         overwrite=a.overwrite,

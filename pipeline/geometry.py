@@ -22,7 +22,7 @@ from typing import Literal
 
 import numpy as np
 
-from pipeline.distance.array_ns import namespace
+from pipeline.xp import namespace
 
 PrimitiveKind = Literal["box", "cylinder", "sphere", "capsule"]
 _SIZE_LEN = {"box": 3, "sphere": 1, "cylinder": 2, "capsule": 2}

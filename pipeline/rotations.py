@@ -94,3 +94,15 @@ def quat_velocity(q1: np.ndarray, q2: np.ndarray, dt: float) -> np.ndarray:
     angle = 2.0 * np.arctan2(s, dq[..., :1])
     scale = np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 2.0)
     return v * scale / dt
+
+
+def rotation_rows(q, xp):
+    """Rows of R for wxyz quaternions q (..., 4), normalised; entries are scalars or arrays."""
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    n = xp.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    return (
+        (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+        (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+        (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
+    )

@@ -40,9 +40,9 @@ import numpy as np
 import trimesh
 
 from pipeline.collision_mesh import collision_parts, load_mesh
-from pipeline.distance.array_ns import namespace
 from pipeline.geometry import Chair, MeshGeometry, ObjectGeometry, ObjectPhysics, Primitive
 from pipeline.robot import G1_JOINT_NAMES, ActuatorProfile, actuator_profile, g1_spec
+from pipeline.xp import namespace
 
 PHYSICS_TIMESTEP = 0.005
 IMPRATIO = 10.0

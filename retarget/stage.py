@@ -11,20 +11,18 @@ error and the others go on. A rerun on the same input with the same options find
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
-from pathlib import Path
 
 from tqdm import tqdm
 
-from pipeline import default_input, synthetic
 from pipeline.clip import HumanClip, RobotClip
 from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.clips import robot_clips_to_episodes
 from pipeline.dataset.objects import objects_note
 from pipeline.dataset.write import write_dataset
 from pipeline.errors import InputError
-from pipeline.ingest import ingest, is_synthetic_spec, parse_synthetic_spec
 from pipeline.stage.executor import check_executor
 from pipeline.stage.inspect_log import write_robot_log
 from pipeline.stage.paths import file_stem, stage_dir
@@ -87,24 +85,10 @@ def feature_frames(features) -> dict[str, str]:
     return {f.name: frames.get(f.name, "world, z-up" if f.name.endswith(".pose") else "") for f in features}
 
 
-def input_fingerprint(
-    input_path: str | None, *, body_model: str | None = None, height_override: float | None = None
-) -> str:
-    """What a run's output depends on (:mod:`pipeline.stage.state`): every input file's path, size and
-    mtime (the embedded default: its generator's source code; a ``synthetic:`` corpus: that code and the
-    spec's seeds and tasks, so ``synthetic:0-2`` and ``synthetic:0,1,2`` are the same input), the body model's,
-    and the height override; not ``jobs``, which changes only the speed. A bad corpus spec is its one-line
-    :class:`InputError` here, before any work."""
-    generator = [Path(default_input.__file__), *sorted(Path(synthetic.__file__).parent.glob("*.py"))]
-    if input_path is None:
-        source = "embedded default " + files_fingerprint(generator, by_content=True)
-    elif is_synthetic_spec(input_path):
-        seeds, tasks = parse_synthetic_spec(input_path)
-        source = "synthetic corpus " + fingerprint(
-            generator=files_fingerprint(generator, by_content=True), seeds=seeds, tasks=tasks
-        )
-    else:
-        source = files_fingerprint([input_path])
+def input_fingerprint(source: str, *, body_model: str | None = None, height_override: float | None = None) -> str:
+    """What a run's output depends on (:mod:`pipeline.stage.state`): the human input's ``source`` fingerprint
+    (:func:`ingest.stage.source_fingerprint`), the body model's, and the height override; not ``jobs``, which changes
+    only the speed."""
     body = files_fingerprint([body_model]) if body_model else None
     return fingerprint(
         stage="retargeted", method=METHOD, fps=FPS, input=source, body_model=body, height=height_override
@@ -128,32 +112,36 @@ def _card(name: str, done: list[ClipResult], features) -> DatasetCard:
 
 
 def run_stage(
-    input_path: str | None,
     name: str,
+    source: str,
+    human: Callable[[], Sequence[HumanClip]],
     *,
+    input_label: str,
     overwrite: bool = False,
     jobs: int = 1,
     executor: str = "local",
     body_model: str | None = None,
     height_override: float | None = None,
 ) -> dict:
-    """``lessmimic retarget``: ingest, retarget every clip, write the dataset, report and logs. Without
-    ``overwrite``, a finished run on the same input with the same options (:func:`input_fingerprint`) is up
-    to date: its report comes back with ``"up_to_date": True`` and nothing is done."""
+    """``lessmimic retarget``: retarget every clip of ``human()`` (the human stage, run only when there is work: the
+    CLI passes :func:`ingest.stage.ingest`), write the dataset, report and logs. ``source`` fingerprints the input
+    (:func:`ingest.stage.source_fingerprint`), ``input_label`` names it in the report. Without ``overwrite``, a
+    finished run on the same input with the same options (:func:`input_fingerprint`) is up to date: its report comes
+    back with ``"up_to_date": True`` and nothing is done. The run's resume record is written only after ``human()``
+    has read and validated the input, so a refused input leaves nothing behind."""
     check_executor(executor, jobs)
     run = StageRun(
         stage_dir(name, "retargeted"),
-        input_fingerprint(input_path, body_model=body_model, height_override=height_override),
+        input_fingerprint(source, body_model=body_model, height_override=height_override),
     )
     if not overwrite and (done := run.finished()) is not None:
         return {**done, "up_to_date": True}
-    run.begin(overwrite)
+    run.check(overwrite)
     t0 = time.perf_counter()
-    human = ingest(input_path, name, overwrite=True, body_model=body_model)
+    clips = list(human())
+    run.begin(overwrite)
     retarget = partial(retarget_one, height_override=height_override)
-    results = run.map(
-        retarget, list(enumerate(human.clips)), key=_clip_key, jobs=jobs, executor=executor, desc="retarget"
-    )
+    results = run.map(retarget, list(enumerate(clips)), key=_clip_key, jobs=jobs, executor=executor, desc="retarget")
     done = [r for r in results if r.robot is not None]
     failed = [{"episode": r.index, "source": r.source, "error": r.error} for r in results if r.robot is None]
     for r in failed:
@@ -162,7 +150,7 @@ def run_stage(
         "stage": "retargeted",
         "method": METHOD,
         "fps": FPS,
-        "input": input_path or "embedded synthetic default",
+        "input": input_label,
         "clips": [{"source": r.source, "task": r.robot.task, **r.metrics, "scale": r.scale} for r in done],
         "failed": failed,
         "summary": summarise([r.metrics for r in done]) if done else {},
@@ -182,5 +170,5 @@ def run_stage(
     for k, r in enumerate(tqdm(done, desc="logs and plots", unit="clip")):
         stem = f"{k:03d}_{file_stem(r.source)}"
         write_robot_log(r.robot, run.logs / f"{stem}.mcap")
-        plot_clip(r.robot, human.clips[r.index].resampled(FPS), run.logs / f"{stem}.png")
+        plot_clip(r.robot, clips[r.index].resampled(FPS), run.logs / f"{stem}.png")
     return run.finish({**report, "seconds_wall": time.perf_counter() - t0}, dataset_written=True)

@@ -25,9 +25,9 @@ def bc_corpus(tmp_path_factory):
     ``train``, and a BC policy trained on it for 30 steps: ``(episodes, policy path)``. Module scope: built once per
     test module that asks for it."""
     from features.stage import run_stage as features_stage
+    from lessmimic.chain import retarget as retarget_stage
     from physicalize.stage import run_stage as physicalize_stage
     from pipeline.stage.paths import stage_dir
-    from retarget.stage import run_stage as retarget_stage
     from train.bc import BCConfig, train_bc
     from train.episodes import load_episodes
     from train.policy import PolicyConfig

@@ -3,7 +3,8 @@ the numpy pose transform of per-point poses."""
 
 import numpy as np
 
-from pipeline.distance.field import ObjectField, rotation_rows
+from pipeline.distance.field import ObjectField
+from pipeline.rotations import rotation_rows
 
 
 def check_pose_per_frame(field: ObjectField, local: np.ndarray, poses: np.ndarray) -> np.ndarray:

@@ -97,7 +97,7 @@ def _tree(folder):
 
 
 def test_retarget_rerun_on_the_same_input_does_nothing(tmp_path, monkeypatch, capsys):
-    from pipeline.default_input import default_clips
+    from ingest.default_input import default_clips
 
     monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path / "datasets"))
     clip = next(c for c in default_clips() if c.task == "Push")

@@ -7,7 +7,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from pipeline.default_input import default_clips
+from ingest.default_input import default_clips
 from pipeline.geometry import Primitive
 from pipeline.robot import default_qpos
 from pipeline.scene import SceneObject, build_scene, link_collision_geoms, object_collision_geoms

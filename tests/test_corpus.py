@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from ingest.stage import is_synthetic_spec, load_input, parse_synthetic_spec, source_fingerprint, synthetic_corpus
 from pipeline.errors import InputError
-from pipeline.ingest import is_synthetic_spec, load_input, parse_synthetic_spec, synthetic_corpus
 from retarget.stage import input_fingerprint
 
 TASKS = ("PickUp", "SitStand", "Push", "Carry")
@@ -58,7 +58,7 @@ def test_bad_spec_is_one_line_input_error_naming_the_field(spec, field, words):
     with pytest.raises(InputError):  # the same line from the loader and the retarget stage, before any work
         load_input(spec)
     with pytest.raises(InputError):
-        input_fingerprint(spec)
+        source_fingerprint(spec)
 
 
 def test_load_two_seeds_gives_eight_unique_synthetic_clips_with_moved_objects():
@@ -74,7 +74,7 @@ def test_load_two_seeds_gives_eight_unique_synthetic_clips_with_moved_objects():
 
 
 def test_tasks_filter_and_seed_clips_equal_the_generators():
-    from pipeline.default_input import default_clips
+    from ingest.default_input import default_clips
 
     clips = synthetic_corpus("synthetic:3:Push,PickUp")
     assert [c.source for c in clips] == ["synthetic:PickUp:seed3", "synthetic:Push:seed3"]
@@ -93,14 +93,18 @@ def test_default_input_is_unchanged():
         np.testing.assert_array_equal(a.joint_pos, b.joint_pos)
 
 
+def fingerprint(spec, **options):
+    return input_fingerprint(source_fingerprint(spec), **options)
+
+
 def test_retarget_fingerprint_names_the_spec():
-    fp = input_fingerprint("synthetic:0-24")
-    assert fp == input_fingerprint("synthetic:0-24")  # a rerun is up to date
-    assert fp == input_fingerprint("synthetic:0-24:PickUp,SitStand,Push,Carry")  # the same seeds and tasks
+    fp = fingerprint("synthetic:0-24")
+    assert fp == fingerprint("synthetic:0-24")  # a rerun is up to date
+    assert fp == fingerprint("synthetic:0-24:PickUp,SitStand,Push,Carry")  # the same seeds and tasks
     others = {
-        input_fingerprint(s)
+        fingerprint(s)
         for s in ["synthetic:0-23", "synthetic:0-24:PickUp", "synthetic:1-25", "synthetic:0", "synthetic:0,1"]
     }
     assert fp not in others and len(others) == 5
-    assert input_fingerprint(None) not in others | {fp}  # the embedded default is its own input
-    assert input_fingerprint("synthetic:0-24", height_override=1.5) != fp
+    assert fingerprint(None) not in others | {fp}  # the embedded default is its own input
+    assert fingerprint("synthetic:0-24", height_override=1.5) != fp

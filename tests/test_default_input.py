@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from ingest.default_input import HAND_OFFSET, REST_OFFSETS, default_clips, default_demos
 from pipeline.clip import HumanClip
-from pipeline.default_input import HAND_OFFSET, REST_OFFSETS, default_clips, default_demos
 from pipeline.geometry import Chair, Primitive
 from pipeline.rotations import rotation_from_wxyz
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 
+from ingest.synthetic import default_demos
 from pipeline.foot_contact import FootContacts, detect_foot_contacts, find_foot_joints, keep_runs
-from pipeline.synthetic import default_demos
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 
+from ingest.synthetic import default_clips
 from pipeline.rotations import quat_mat
-from pipeline.synthetic import default_clips
 from pipeline.take import held_frames, human_hold, object_field
 from retarget.clip import FPS, retarget_clip
 from retarget.grip import RAMP, SQUEEZE, anchored_targets, g1_opposition

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 
+from ingest.default_input import default_clips
 from lessmimic.cli import main
 from pipeline.dataset.clips import episodes_to_robot_clips
-from pipeline.default_input import default_clips
 from pipeline.errors import InputError
 from pipeline.readers import read_robot_clips
 from pipeline.robot import G1_JOINT_NAMES, actuator_profile, g1_model

@@ -16,8 +16,8 @@ import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 from scipy.spatial.transform import Rotation
 
+from ingest.default_input import default_clips
 from pipeline.clip import HumanClip, Skeleton
-from pipeline.default_input import default_clips
 from pipeline.errors import InputError
 from pipeline.robot import g1_xml_path
 from pipeline.rotations import rotation_from_wxyz, wxyz_from_rotation

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 
+from ingest.synthetic.skeleton import SKELETON
 from pipeline.clip import HumanClip, ObjectTrack, RobotClip
 from pipeline.geometry import Primitive
 from pipeline.robot import G1_JOINT_NAMES, joint_limits
-from pipeline.synthetic.skeleton import SKELETON
 from retarget.collision_sweep import scene_for
 from retarget.metrics import METRIC_KEYS, evaluate_file, ground_clearance, retarget_metrics, summarise
 
@@ -55,7 +55,7 @@ def _geom_pose(q: np.ndarray, geom: str) -> tuple[np.ndarray, np.ndarray, np.nda
 def _human(frames: int = T, *, lift: np.ndarray | None = None, flags: dict | None = None) -> HumanClip:
     """The synthetic SMPL skeleton standing still (feet flat on the floor); ``lift`` (frames,)
     raises the whole body; ``flags`` {joint: (frames,) bool} sets object-contact flags."""
-    from pipeline.synthetic import default_clips
+    from ingest.synthetic import default_clips
 
     rest = default_clips()[0].joint_pos[0]
     pos = np.repeat(rest[None], frames, axis=0)

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from qpsolvers import solve_qp
 
+from ingest.synthetic import default_clips
 from physicalize.object_loop import HeldObject, LoopGains, ObjectLoop
 from physicalize.object_motion import LIFT, ObjectMotion
 from physicalize.problem import tracking_problem
@@ -17,7 +18,6 @@ from physicalize.wbc_config import WBCConfig
 from pipeline.geometry import ObjectPhysics, Primitive
 from pipeline.rotations import quat_mat, yaw_quat
 from pipeline.scene import SceneObject, build_scene, link_collision_geoms
-from pipeline.synthetic import default_clips
 from retarget.clip import retarget_clip
 
 HALF = (0.15, 0.10, 0.08)

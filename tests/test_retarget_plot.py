@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from pipeline.default_input import default_clips
+from ingest.default_input import default_clips
 from retarget.clip import FPS, retarget_clip
 from retarget.plot import clip_series, plot_clip
 

@@ -58,7 +58,7 @@ def test_intermimic_table_clip_meets_the_quality_bars():
     ],
 )
 def test_default_clips_meet_the_quality_bars(task):
-    from pipeline.default_input import default_clips
+    from ingest.default_input import default_clips
 
     clip = next(c for c in default_clips() if c.task == task)
     _, metrics, _ = retarget_clip(clip)
@@ -66,7 +66,7 @@ def test_default_clips_meet_the_quality_bars(task):
 
 
 def test_short_clip_is_reported_and_others_go_on(tmp_path):
-    from pipeline.default_input import default_clips
+    from ingest.default_input import default_clips
 
     good = default_clips()[2]
     short = type(good)(good.skeleton, good.joint_pos[:1], good.fps, "short.bvh")

@@ -13,12 +13,12 @@ from mocap_paths import needs_shared
 from scipy.spatial.transform import Rotation
 from test_mapping import CLIPS, clip_named
 
+from ingest.default_input import default_clips, default_demos
+from ingest.synthetic.skeleton import FOREARM, SHANK, THIGH, UPPER_ARM
 from pipeline.clip import HumanClip, ObjectTrack
-from pipeline.default_input import default_clips, default_demos
 from pipeline.errors import InputError
 from pipeline.robot import g1_xml_path
 from pipeline.rotations import rotation_from_wxyz, wxyz_from_rotation
-from pipeline.synthetic.skeleton import FOREARM, SHANK, THIGH, UPPER_ARM
 from retarget.frames import standing_frame
 from retarget.mapping import g1_rest, load_mapping
 from retarget.objects import map_objects, object_bottom

@@ -6,12 +6,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from ingest.synthetic import default_clips
 from physicalize.clip import physicalize_clip
 from physicalize.reference import build_reference
 from physicalize.start import BLEND_S, MOVING_MPS, SETTLE_S, clean_start, prefix_frames, starts_clean
 from pipeline.kinematics import qvel_from_qpos
 from pipeline.robot import g1_model
-from pipeline.synthetic import default_clips
 from retarget.clip import retarget_clip
 
 

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from features.stage import run_stage as features_stage
+from lessmimic.chain import retarget as retarget_stage
 from physicalize.stage import run_stage as physicalize_stage
 from pipeline.dataset.read import episode_ranges, read_columns
 from pipeline.errors import InputError
 from pipeline.stage.paths import stage_dir
-from retarget.stage import run_stage as retarget_stage
 from train.actors import TeacherActor
 from train.env import InteractionEnv
 from train.episodes import load_episodes, scaled_objects

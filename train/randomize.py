@@ -29,9 +29,9 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from pipeline.clip import ObjectTrack
-from pipeline.distance.array_ns import as_float, concat, namespace
 from pipeline.geometry import ObjectPhysics, Primitive
 from pipeline.robot import NQ_ROBOT, NUM_JOINTS
+from pipeline.xp import as_float, concat, namespace
 
 
 @dataclass(frozen=True)

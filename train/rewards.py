@@ -1,6 +1,6 @@
 """The post-training reward (paper App. "Reward Design", table "Reward components"), one plain function per term
 over batched arrays, written once for numpy (the CPU environment) and torch (a GPU backend) alike
-(:mod:`pipeline.distance.array_ns`). Every term returns one value per environment, unweighted; :class:`RewardWeights`
+(:mod:`pipeline.xp`). Every term returns one value per environment, unweighted; :class:`RewardWeights`
 holds the table's weights and :func:`total` sums ``weight * term``:
 
 =================  ==========================================================  ===============
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from pipeline.distance.array_ns import namespace
+from pipeline.xp import namespace
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipeline.distance.array_ns import nonzero
+from pipeline.xp import nonzero
 
 _MAX_STEPS = 80
 _REL_TOL = 1e-15

@@ -24,10 +24,11 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from pipeline.distance.array_ns import as_float, namespace, to_numpy
 from pipeline.distance.primitive import chair_shape, primitive_shape
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.geometry import Chair, MeshGeometry, ObjectGeometry, Primitive, geometry_from_dict
+from pipeline.rotations import rotation_rows
+from pipeline.xp import as_float, namespace, to_numpy
 
 CHUNK = 32768
 
@@ -47,18 +48,6 @@ class NearestSample(NamedTuple):
     grad: Any
     closest: Any
     object_index: Any
-
-
-def rotation_rows(q, xp):
-    """Rows of R for wxyz quaternions q (..., 4), normalised; entries are scalars or arrays."""
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    n = xp.sqrt(w * w + x * x + y * y + z * z)
-    w, x, y, z = w / n, x / n, y / n, z / n
-    return (
-        (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
-        (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
-        (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
-    )
 
 
 def _rigid(pose) -> tuple[list, tuple]:

@@ -40,11 +40,11 @@ from typing import Any
 import numpy as np
 
 from pipeline.collision_mesh import cache_dir, load_mesh
-from pipeline.distance.array_ns import as_float, is_numpy
 from pipeline.distance.octree import CachedField, OctreeSpec
 from pipeline.distance.warp_runtime import warp as _warp
 from pipeline.errors import InputError
 from pipeline.geometry import MeshGeometry
+from pipeline.xp import as_float, is_numpy
 
 EPS_MESH = 1e-6  # m: below this the direction (p - c)/phi is float32 noise; the face normal is used
 # m: the bounds test leaves the winding number to points this near the box, where a sheet in a

@@ -34,10 +34,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.distance.array_ns import nonzero
 from pipeline.distance.ellipsoid import Ellipsoid
 from pipeline.distance.warp_runtime import runs_on
 from pipeline.geometry import Chair, Primitive
+from pipeline.xp import nonzero
 
 EPS = 1e-9  # m: a point this close to the surface takes the outward normal as its direction
 

@@ -22,9 +22,9 @@ import numpy as np
 import warp as wp
 
 from pipeline.distance import ellipsoid_warp as ell
-from pipeline.distance.array_ns import is_numpy
 from pipeline.distance.ellipsoid import Ellipsoid
 from pipeline.distance.warp_runtime import warp
+from pipeline.xp import is_numpy
 
 EPS = wp.constant(wp.float64(1e-9))  # pipeline.distance.primitive.EPS
 

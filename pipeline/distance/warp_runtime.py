@@ -6,7 +6,7 @@ CUDA device for CUDA tensors, on torch's current stream (so they are ordered wit
 
 from __future__ import annotations
 
-from pipeline.distance.array_ns import is_numpy, namespace
+from pipeline.xp import is_numpy, namespace
 
 
 def warp():

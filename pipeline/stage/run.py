@@ -3,7 +3,9 @@
     run = StageRun(out, fingerprint(...))          # datasets/<NAME>/<stage>, and what the output depends on
     if not overwrite and (done := run.finished()):  # a finished run on the same input and options
         return {**done, "up_to_date": True}
-    run.begin(overwrite)                           # may this run write `out`? (one line if not)
+    run.check(overwrite)                           # may this run write `out`? (one line if not; nothing written)
+    clips = read(...)                              # the input, read and validated
+    run.begin(overwrite)                           # the resume record
     results = run.map(per_clip, clips, key=..., jobs=..., executor=...)   # resumable, local or Ray
     ... write_dataset(run.out, ..., overwrite=run.replaces) ... logs, figures ...
     return run.finish(report, dataset_written=...)  # the report; the done mark, written last
@@ -78,11 +80,18 @@ class StageRun:
             return None
         return report
 
-    def begin(self, overwrite: bool) -> None:
-        """Claim ``out`` for this run: an existing dataset is replaced only with ``overwrite`` or when this same
-        run (same fingerprint, interrupted) wrote it; otherwise one :class:`~pipeline.errors.InputError` line."""
+    def check(self, overwrite: bool) -> bool:
+        """Whether this run may write ``out``, writing nothing: an existing dataset is replaced only with
+        ``overwrite`` or when this same run (same fingerprint, interrupted) wrote it; otherwise one
+        :class:`~pipeline.errors.InputError` line. A stage that reads the user's input calls it before reading,
+        and :meth:`begin` after, so a refused input leaves no resume record behind."""
         own = up_to_date(self.work / "run.json", self.fingerprint) is not None
         check_target(self.out, overwrite or own)
+        return own
+
+    def begin(self, overwrite: bool) -> None:
+        """Claim ``out`` for this run (:meth:`check`) and record the fingerprint in ``.work/<stage>/run.json``."""
+        own = self.check(overwrite)
         if overwrite or not own:
             shutil.rmtree(self.work, ignore_errors=True)  # a fresh run, or another run's leftovers
         write_json_atomic(self.work / "run.json", {KEY: self.fingerprint})

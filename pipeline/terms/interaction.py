@@ -19,8 +19,8 @@ Everything takes numpy arrays or torch tensors alike (RL environments compute th
 
 from __future__ import annotations
 
-from pipeline.distance.array_ns import concat, namespace
-from pipeline.distance.field import rotation_rows
+from pipeline.rotations import rotation_rows
+from pipeline.xp import concat, namespace
 
 DF_PARTS = ("phi", "grad_x", "grad_y", "grad_z", "v_norm_x", "v_norm_y", "v_norm_z", "v_tan_x", "v_tan_y", "v_tan_z")
 DEMO_PARTS = ("phi", "grad_x", "grad_y", "grad_z")

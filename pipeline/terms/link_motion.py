@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from pipeline.distance.array_ns import namespace
 from pipeline.errors import InputError
 from pipeline.robot import g1_model
+from pipeline.xp import namespace
 
 
 @dataclass(frozen=True)

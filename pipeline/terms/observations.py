@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.distance.array_ns import concat, namespace
-from pipeline.distance.field import rotation_rows
 from pipeline.robot import G1_JOINT_NAMES, JOINTS_QPOS, JOINTS_QVEL, ROOT_ANG_VEL
+from pipeline.rotations import rotation_rows
+from pipeline.xp import concat, namespace
 
 PROPRIO_NAMES: tuple[str, ...] = (
     tuple(f"q.{j}" for j in G1_JOINT_NAMES)
@@ -66,7 +66,7 @@ def proprioception(qpos, qvel, last_action):
     """(N, 93) ``[q, dq, gravity_root, omega_root, a_(t-1)]`` from ``qpos (N, 36)``, MuJoCo ``qvel (N, 35)``
     (its root angular velocity is already in the root frame) and the previous actions ``last_action (N, 29)``
     (the rows are a clip's frames, with :func:`previous_actions`, or an environment batch); numpy or torch alike
-    (:mod:`pipeline.distance.array_ns`), so the CPU and GPU environments share it."""
+    (:mod:`pipeline.xp`), so the CPU and GPU environments share it."""
     parts = [qpos[:, JOINTS_QPOS], qvel[:, JOINTS_QVEL], projected_gravity(qpos), qvel[:, ROOT_ANG_VEL], last_action]
     return concat(parts, namespace(qpos), axis=1)
 

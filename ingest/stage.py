@@ -19,17 +19,19 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from ingest import default_input, synthetic
+from ingest.default_input import TASKS, default_clips
 from pipeline.clip import HumanClip
 from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.clips import human_clips_to_episodes
 from pipeline.dataset.objects import objects_note
 from pipeline.dataset.write import check_target, write_dataset
-from pipeline.default_input import TASKS, default_clips
 from pipeline.errors import InputError
 from pipeline.readers import read_clips
 from pipeline.stage.atomic import write_json_atomic
 from pipeline.stage.inspect_log import write_human_log
 from pipeline.stage.paths import file_stem, stage_dir
+from pipeline.stage.state import files_fingerprint, fingerprint
 
 HUMAN_FPS = 30
 
@@ -112,6 +114,27 @@ def load_input(input_path: str | None, *, body_model: str | None = None, fps: fl
     return read_clips(Path(input_path), body_model=body_model, fps=fps)
 
 
+def source_fingerprint(input_path: str | None) -> str:
+    """What the human clips of ``input_path`` depend on: every input file's path, size and mtime (the embedded
+    default: its generator's source code; a ``synthetic:`` corpus: that code and the spec's seeds and tasks, so
+    ``synthetic:0-2`` and ``synthetic:0,1,2`` are the same input). A bad corpus spec is its one-line
+    :class:`InputError` here, before any work."""
+    generator = [Path(default_input.__file__), *sorted(Path(synthetic.__file__).parent.glob("*.py"))]
+    if input_path is None:
+        return "embedded default " + files_fingerprint(generator, by_content=True)
+    if is_synthetic_spec(input_path):
+        seeds, tasks = parse_synthetic_spec(input_path)
+        return "synthetic corpus " + fingerprint(
+            generator=files_fingerprint(generator, by_content=True), seeds=seeds, tasks=tasks
+        )
+    return files_fingerprint([input_path])
+
+
+def input_label(input_path: str | None) -> str:
+    """How a report names the input."""
+    return input_path or "embedded synthetic default"
+
+
 def ingest(
     input_path: str | None,
     name: str,
@@ -159,7 +182,7 @@ def ingest(
     seconds = time.perf_counter() - t0
     report = {
         "stage": "human",
-        "input": input_path or "embedded synthetic default",
+        "input": input_label(input_path),
         "synthetic": synthetic,
         "clips": [
             {

@@ -2,7 +2,7 @@
 
 :func:`default_clips` returns four clips generated here (no motion capture involved), each
 labelled ``synthetic=True``, ``source="synthetic:<task>"``, in the :class:`~pipeline.clip.HumanClip`
-schema on the SMPL body's 22 joints (:mod:`pipeline.synthetic.skeleton`, a 1.70 m adult; z-up,
+schema on the SMPL body's 22 joints (:mod:`ingest.synthetic.skeleton`, a 1.70 m adult; z-up,
 metres, wxyz; the walker starts at the origin facing +x).
 
 How they are made: per-frame targets (pelvis path and heading, trunk pitch, flat-foot ankle
@@ -10,7 +10,7 @@ targets from a footstep plan, wrist targets on the object) are turned into joint
 2-link IK for legs and arms, and positions by forward kinematics, so bone lengths are exactly
 constant and ``joint_quat`` holds the global joint orientations (identity = the T-pose rest,
 facing +x). Standing: pelvis 0.92 m, shoulders 1.385 m, hanging wrists 0.84 m. Walking
-(:mod:`pipeline.synthetic.gait`): step length <= 0.55 m (0.33 m pushing), step period 0.5 s
+(:mod:`ingest.synthetic.gait`): step length <= 0.55 m (0.33 m pushing), step period 0.5 s
 (cadence 2.0 steps/s, stride frequency 1.0 Hz; 0.55 s turning or carrying, 0.6 s pushing),
 swing 0.4 s, ~1.05 m/s at cruise with smooth starts and stops; planted feet flat and
 motionless, 5-7 cm swing clearance, pelvis bob ~4 cm and sway +-2 cm, arms swinging against
@@ -49,11 +49,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ingest.synthetic.body import HAND_OFFSET, Phase, SyntheticDemo
+from ingest.synthetic.skeleton import JOINT_NAMES, PARENTS, SKELETON, SUBJECT_HEIGHT
+from ingest.synthetic.skeleton import OFFSETS as REST_OFFSETS
+from ingest.synthetic.tasks import carry, pickup, push, sit_stand
 from pipeline.clip import HumanClip
-from pipeline.synthetic.body import HAND_OFFSET, Phase, SyntheticDemo
-from pipeline.synthetic.skeleton import JOINT_NAMES, PARENTS, SKELETON, SUBJECT_HEIGHT
-from pipeline.synthetic.skeleton import OFFSETS as REST_OFFSETS
-from pipeline.synthetic.tasks import carry, pickup, push, sit_stand
 
 TASKS = {"PickUp": pickup, "SitStand": sit_stand, "Push": push, "Carry": carry}
 

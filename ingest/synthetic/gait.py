@@ -23,7 +23,7 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 from scipy.ndimage import convolve1d, minimum_filter1d
 
-from pipeline.synthetic.skeleton import ANKLE_Z, LEG_REACH, PELVIS_FWD, STANCE_HALF_WIDTH, hip_offsets
+from ingest.synthetic.skeleton import ANKLE_Z, LEG_REACH, PELVIS_FWD, STANCE_HALF_WIDTH, hip_offsets
 
 SWAY = 0.02
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ingest.synthetic.body import HAND_OFFSET, Channels, evaluate, grip_points, make_demo, yaw_pose
+from ingest.synthetic.gait import GaitPlan, Keys, heading
+from ingest.synthetic.skeleton import PELVIS_FWD
 from pipeline.geometry import Chair, Primitive
-from pipeline.synthetic.body import HAND_OFFSET, Channels, evaluate, grip_points, make_demo, yaw_pose
-from pipeline.synthetic.gait import GaitPlan, Keys, heading
-from pipeline.synthetic.skeleton import PELVIS_FWD
 
 SMALL_BOX = Primitive("box", (0.20, 0.15, 0.15))  # 0.4 x 0.3 x 0.3 m, long axis along the walker
 LARGE_BOX = Primitive("box", (0.30, 0.30, 0.60))  # 0.6 x 0.6 x 1.2 m cabinet-like box

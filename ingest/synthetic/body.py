@@ -6,9 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ingest.synthetic.gait import GaitPlan, Keys, heading, lift_swing_feet, pelvis_height, smooth_below
+from ingest.synthetic.skeleton import REST_PELVIS_Z, SKELETON, SUBJECT_HEIGHT, J, PoseTargets, solve_pose
 from pipeline.clip import HumanClip, ObjectTrack
-from pipeline.synthetic.gait import GaitPlan, Keys, heading, lift_swing_feet, pelvis_height, smooth_below
-from pipeline.synthetic.skeleton import REST_PELVIS_Z, SKELETON, SUBJECT_HEIGHT, J, PoseTargets, solve_pose
 
 HAND_OFFSET = 0.04  # wrist joint centre outside the touched face: half a hand's thickness + palm
 WALK_DIP = 0.03  # the nominal pelvis height drops this much while walking (knees softer)
