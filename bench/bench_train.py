@@ -1,6 +1,7 @@
 """Training-side speed on the CPU, side by side with its baseline:
 
-* **environment**: control steps per CPU-second of :class:`train.env.InteractionEnv` (4 physics substeps, then the
+* **environment**: control steps per CPU-second of :class:`train.envs.cpu.env.InteractionEnv` (4 physics substeps, then
+  the
   online observation: proprio, root command, DF terms of 14 links) against raw ``mj_step`` of the same scenes at
   4 substeps (no observation); the issue's bar: within 25% of raw. Per task scene and for ``--envs`` environments
   stepped in 1 and 2 threads (wall time then, both cores);
@@ -30,7 +31,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from pipeline.stage.paths import stage_dir  # noqa: E402
-from train.env import EnvConfig, InteractionEnv  # noqa: E402
+from train.envs.cpu.env import EnvConfig, InteractionEnv  # noqa: E402
 from train.episodes import load_episodes  # noqa: E402
 from train.teacher import Teacher  # noqa: E402
 
@@ -116,8 +117,8 @@ def post_training_table(name: str, envs: int, iterations: int = 4, repeats: int 
 
     from train.aip import PostTrainConfig, build, iteration
     from train.bc import BCConfig, train_bc
+    from train.envs.cpu.vec_env import PostEnvConfig
     from train.policy import PolicyConfig
-    from train.post_env import PostEnvConfig
     from train.vae import VAEConfig
 
     run = tempfile.mkdtemp()

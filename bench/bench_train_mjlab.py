@@ -1,8 +1,8 @@
-"""Post-training speed on a GPU with the mjlab backend (``--backend mjlab``, :mod:`train.mjlab_env`), side by side
+"""Post-training speed on a GPU with the mjlab backend (``--backend mjlab``, :mod:`train.envs.mjlab.env`), side by side
 with its own baselines, per number of worlds:
 
 * **physics**: MuJoCo Warp alone on the same worlds (4 substeps per control step, no terms, no restarts);
-* **environment**: :class:`train.mjlab_env.MjlabPostTrainEnv` steps (physics, observation, reward terms, restarts),
+* **environment**: :class:`train.envs.mjlab.env.MjlabPostTrainEnv` steps (physics, observation, reward terms, restarts),
   the policy's targets held at the current joint angles;
 * **post-training**: PPO env steps per second (rollout and update, :func:`train.aip.iteration`) for plain PPO without
   randomisations, with the six randomisations (those the backend runs), and with the AIP and AMP priors too; the
@@ -21,10 +21,10 @@ from dataclasses import replace
 import torch
 
 from train.aip import PostTrainConfig, build, iteration
+from train.envs.cpu.vec_env import PostEnvConfig
+from train.envs.mjlab.env import MjlabPostTrainEnv, runnable_episodes
 from train.episodes import load_episodes
-from train.mjlab_env import MjlabPostTrainEnv, runnable_episodes
 from train.policy import load_policy
-from train.post_env import PostEnvConfig
 
 
 def _sync(device: str) -> None:

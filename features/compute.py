@@ -19,24 +19,24 @@ from pipeline.clip import PhysicalizedClip
 from pipeline.distance.field import ObjectField, ObjectFields
 from pipeline.errors import InputError
 from pipeline.geometry import MeshGeometry, geometry_to_dict
-from pipeline.robot import G1_LINK_NAMES, LESSMIMIC_DEMO_DF_BODIES
-from pipeline.terms.interaction import DEMO_MAX_DISTANCE_M, demo_features, interaction_features, surface_point_velocity
+from pipeline.terms.interaction import demo_features, interaction_features, surface_point_velocity
+from pipeline.terms.layout import DEMO_LINKS, DEMO_MAX_DISTANCE_M, DF_LINKS, HISTORY, ROOT_HORIZON_S
 from pipeline.terms.link_motion import link_motion
 from pipeline.terms.observations import previous_actions, proprioception, root_command
 
 
 @dataclass(frozen=True)
 class FeatureConfig:
-    """``links``: the DF feature links (default: pelvis, torso, hips, knees, feet, shoulders, elbows,
-    wrists); ``demo_links`` / ``demo_max_distance_m``: the released demo's 7 query bodies and distance
-    clip; ``root_horizon_s``: how far ahead the root command's target lies; ``history``: the window
-    length ``l`` of ``I_t`` the dataset card tells loaders to use (the demo's 5)."""
+    """``links``: the DF feature links; ``demo_links`` / ``demo_max_distance_m``: the released demo's 7 query bodies
+    and distance clip; ``root_horizon_s``: how far ahead the root command's target lies; ``history``: the window
+    length ``l`` of ``I_t`` the dataset card tells loaders to use. The defaults are the observation contract's
+    (:mod:`pipeline.terms.layout`)."""
 
-    links: tuple[str, ...] = G1_LINK_NAMES
-    demo_links: tuple[str, ...] = LESSMIMIC_DEMO_DF_BODIES
+    links: tuple[str, ...] = DF_LINKS
+    demo_links: tuple[str, ...] = DEMO_LINKS
     demo_max_distance_m: float = DEMO_MAX_DISTANCE_M
-    root_horizon_s: float = 1.0
-    history: int = 5
+    root_horizon_s: float = ROOT_HORIZON_S
+    history: int = HISTORY
 
     @property
     def query_links(self) -> tuple[str, ...]:

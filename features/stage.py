@@ -36,10 +36,25 @@ from pipeline.stage.executor import check_executor
 from pipeline.stage.paths import file_stem, logs_dir, stage_dir
 from pipeline.stage.run import StageRun, digest
 from pipeline.stage.state import dataset_fingerprint, fingerprint
-from pipeline.terms.interaction import DEMO_PARTS, DF_PARTS, feature_names
+from pipeline.terms.layout import (
+    CONTROL_FPS,
+    DEMO_MAX_DISTANCE_M,
+    DEMO_PARTS,
+    DF,
+    DF_DEMO,
+    DF_OBJECT,
+    DF_PARTS,
+    DF_RELATIVE,
+    HISTORY,
+    PROPRIO,
+    PROPRIO_NAMES,
+    ROOT_COMMAND,
+    ROOT_COMMAND_NAMES,
+    feature_names,
+)
 from pipeline.terms.link_motion import body_ids
-from pipeline.terms.observations import PROPRIO_NAMES, ROOT_COMMAND_NAMES
 
+_WINDOW = [-k / CONTROL_FPS + 0.0 for k in range(HISTORY - 1, -1, -1)]  # the window's delta_timestamps
 CARD_NOTES = [
     "DF features follow LessMimic Sec. III-A: per link, phi = unsigned distance from the link's body origin to the "
     "nearest object surface (exact: analytic primitives, warp closest point or a cached adaptive octree for meshes), "
@@ -47,45 +62,45 @@ CARD_NOTES = [
     "(v . grad) grad and v_tan = v - v_norm with v the link's linear velocity from the simulated state (MuJoCo "
     "kinematics, not finite differences).",
     "The interaction window I_t is not stored: load it with LeRobot's `delta_timestamps`, e.g. "
-    "`{'observation.df': [-0.08, -0.06, -0.04, -0.02, 0.0]}` for l = 5 at 50 fps (frames before the episode start are "
-    "padded and flagged `*_is_pad`), or with `pipeline.dataset.WindowDataset(root, keys, history=5)`.",
-    "`observation.df_demo` is the input contract of the released LessMimic web demo: for its 7 query bodies, "
-    "min(phi, 1 m) and grad in the body's own frame.",
+    f"`{{'{DF}': {_WINDOW}}}` for l = {HISTORY} at {CONTROL_FPS} fps (frames before the episode start are "
+    f"padded and flagged `*_is_pad`), or with `pipeline.dataset.WindowDataset(root, keys, history={HISTORY})`.",
+    f"`{DF_DEMO}` is the input contract of the released LessMimic web demo: for its 7 query bodies, "
+    f"min(phi, {DEMO_MAX_DISTANCE_M:g} m) and grad in the body's own frame.",
 ]
 
 
 def _features(cfg: FeatureConfig, objects: list[str]) -> list[Feature]:
     out = [
         Feature(
-            "observation.df",
+            DF,
             "float32",
             feature_names(cfg.links, DF_PARTS),
             "u_t per link: phi, grad phi, v_norm, v_tan",
             "m, 1, m/s",
         ),
         Feature(
-            "observation.df_relative",
+            DF_RELATIVE,
             "float32",
             feature_names(cfg.links, DF_PARTS),
             "u_t per link with v relative to the velocity of the object's closest surface point",
             "m, 1, m/s",
         ),
         Feature(
-            "observation.df_demo",
+            DF_DEMO,
             "float32",
             feature_names(cfg.demo_links, DEMO_PARTS),
             f"released-demo layout per query body: min(phi, {cfg.demo_max_distance_m:g} m), grad phi in the body frame",
             "m, 1",
         ),
         Feature(
-            "observation.root_command",
+            ROOT_COMMAND,
             "float32",
             ROOT_COMMAND_NAMES,
             f"sparse root target {cfg.root_horizon_s:g} s ahead: position delta, 6-D rotation, target velocity",
             "m, 1, m/s",
         ),
         Feature(
-            "observation.proprio",
+            PROPRIO,
             "float32",
             PROPRIO_NAMES,
             "joint angles, joint velocities, gravity and angular velocity in the root frame, previous action",
@@ -93,32 +108,30 @@ def _features(cfg: FeatureConfig, objects: list[str]) -> list[Feature]:
         ),
     ]
     if len(objects) > 1:
-        out.append(
-            Feature("observation.df_object", "int64", cfg.links, f"index of the nearest object per link, in {objects}")
-        )
+        out.append(Feature(DF_OBJECT, "int64", cfg.links, f"index of the nearest object per link, in {objects}"))
     return out
 
 
 _FRAMES = {
-    "observation.df": "world, z-up",
-    "observation.df_relative": "world, z-up",
-    "observation.df_demo": "query body frame (grad)",
-    "observation.root_command": "root heading frame at t (yaw only)",
-    "observation.proprio": "joint space; root frame (gravity, angular velocity)",
+    DF: "world, z-up",
+    DF_RELATIVE: "world, z-up",
+    DF_DEMO: "query body frame (grad)",
+    ROOT_COMMAND: "root heading frame at t (yaw only)",
+    PROPRIO: "joint space; root frame (gravity, angular velocity)",
 }
 
 
 def _data(f: ClipFeatures, several: bool) -> dict[str, np.ndarray]:
     T = len(f.df)
     data = {
-        "observation.df": f.df.reshape(T, -1),
-        "observation.df_relative": f.df_relative.reshape(T, -1),
-        "observation.df_demo": f.df_demo.reshape(T, -1),
-        "observation.root_command": f.root_command,
-        "observation.proprio": f.proprio,
+        DF: f.df.reshape(T, -1),
+        DF_RELATIVE: f.df_relative.reshape(T, -1),
+        DF_DEMO: f.df_demo.reshape(T, -1),
+        ROOT_COMMAND: f.root_command,
+        PROPRIO: f.proprio,
     }
     if several:
-        data["observation.df_object"] = f.object_index
+        data[DF_OBJECT] = f.object_index
     return data
 
 

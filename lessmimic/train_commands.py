@@ -48,7 +48,7 @@ def _cmd_eval(a: argparse.Namespace) -> int:
     from pipeline.stage.paths import stage_dir
     from train.actors import PolicyActor, TeacherActor
     from train.episodes import load_episodes
-    from train.evaluate import EvalConfig, evaluate, markdown, scale_note, write
+    from train.evaluation.table2 import EvalConfig, evaluate, markdown, scale_note, write
     from train.policy import dataset_layout, load_policy
 
     torch.set_num_threads(a.threads)
@@ -68,7 +68,7 @@ def _cmd_eval(a: argparse.Namespace) -> int:
     print(write(results, out, note))
     print(markdown(results))
     if a.chains and a.policy:
-        from train import chains
+        from train.evaluation import chains
 
         lengths = tuple(int(n) for n in a.chains.split(","))
         ccfg = chains.ChainConfig(lengths=lengths, seeds=cfg.seeds, chains=a.chains_per_seed, envs=a.envs)
@@ -83,7 +83,7 @@ def _cmd_train_aip(a: argparse.Namespace) -> int:
 
     from train.ablation import PRE_TRAINING, ablated
     from train.aip import PostTrainConfig, post_train
-    from train.post_env import PostEnvConfig
+    from train.envs.cpu.vec_env import PostEnvConfig
 
     torch.set_num_threads(a.threads)
     ab = ablated(a.name, a.run, a.ablation, "post")
@@ -103,7 +103,7 @@ def _cmd_train_aip(a: argparse.Namespace) -> int:
     out = ab.post_dir.with_name(ab.post_dir.name + "-mjlab") if mjlab else ab.post_dir  # a GPU run beside the CPU's
     device = a.device or ("cuda" if mjlab else "cpu")
     if mjlab:
-        from train.mjlab_env import check_device
+        from train.envs.mjlab.env import check_device
 
         check_device(device)
     row = post_train(ab.corpus, policy, out, cfg, device=device)

@@ -50,6 +50,7 @@ from physicalize.seat import SEAT_LINKS
 from pipeline.ik_limits import FrameVelocityLimit, MinimumJointLimit, SeparationLimit
 from pipeline.robot import FOOT_BODIES, HAND_BODIES, NQ_ROBOT, NV_ROBOT, joint_velocity_limits, sole_corners
 from pipeline.scene import self_collision_groups
+from pipeline.terms.layout import CONTROL_FPS
 
 
 @dataclass(frozen=True)
@@ -122,7 +123,9 @@ class ReferenceIK:
         self.seat = [mink.FrameTask(b, "body", cfg.seat_position_cost, 0.0, lm_damping=lm) for b in SEAT_LINKS]
         self.config_limit = mink.ConfigurationLimit(model)
         self.knee_limit = MinimumJointLimit(model, {"left_knee_joint": cfg.min_knee, "right_knee_joint": cfg.min_knee})
-        self.velocity_limit = FrameVelocityLimit(model, joint_velocity_limits(cfg.velocity_limit_factor), dt=1.0 / 50.0)
+        self.velocity_limit = FrameVelocityLimit(
+            model, joint_velocity_limits(cfg.velocity_limit_factor), dt=1.0 / CONTROL_FPS
+        )
         self.collision, self.object_limit = _collision_limits(model, cfg)
         self._objects_on = False
         self.freeze = [mink.DofFreezingTask(model, list(range(NV_ROBOT, model.nv)))] if model.nv > NV_ROBOT else []

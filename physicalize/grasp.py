@@ -58,14 +58,14 @@ import numpy as np
 
 from physicalize.grasp_config import GraspConfig
 from physicalize.grasp_force import ObjectLoad, floor_friction, hand_force, hand_friction
-from physicalize.hand_reach import HandReach, ObjectTracks, hand_geoms, hand_offsets, hand_reach
+from physicalize.hand_reach import HandReach, ObjectTracks, hand_offsets, hand_reach
 from physicalize.object_loop import HeldObject
 from physicalize.object_motion import ObjectMotion
 from physicalize.target import Target
 from pipeline.foot_contact import keep_runs, label_runs, runs, widen_runs
 from pipeline.robot import HAND_BODIES
 from pipeline.rotations import quat_mat
-from pipeline.scene import Scene
+from pipeline.scene import Scene, hand_geoms
 
 
 @dataclass

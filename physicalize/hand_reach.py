@@ -12,7 +12,7 @@ import mujoco
 import numpy as np
 
 from pipeline.robot import HAND_BODIES, NQ_ROBOT
-from pipeline.scene import Scene, link_collision_geoms, nearest_geom_pair
+from pipeline.scene import Scene, hand_geoms, nearest_geom_pair
 
 
 @dataclass
@@ -50,11 +50,6 @@ class HandReach:
     dist: np.ndarray
     normal: np.ndarray
     obj: np.ndarray
-
-
-def hand_geoms(model: mujoco.MjModel) -> list[list[int]]:
-    """Collision geoms of each hand (left, right)."""
-    return [link_collision_geoms(model, b) for b in HAND_BODIES]
 
 
 def hand_offsets(model: mujoco.MjModel) -> np.ndarray:

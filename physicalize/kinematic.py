@@ -31,13 +31,13 @@ import mujoco
 import numpy as np
 
 from physicalize.clip import com_series
-from physicalize.contacts import ContactSets
 from physicalize.problem import object_qpos, scene_for
 from physicalize.reference import build_reference
 from physicalize.rollout import Rollout
 from physicalize.stepping import foot_floor_forces
 from physicalize.validate import validate
 from pipeline.clip import RobotClip
+from pipeline.contacts import ContactSets
 from pipeline.kinematics import qvel_from_qpos
 from pipeline.robot import FREE_NQ, JOINTS_QPOS, NUM_JOINTS
 

@@ -51,7 +51,7 @@ from tensordict import TensorDict
 
 from physicalize.problem import tracking_problem
 from physicalize.reference import Reference
-from physicalize.rollout import SUBSTEPS, fallen, initial_state
+from physicalize.rollout import initial_state
 from physicalize.wbc import WholeBodyController
 from pipeline.clip import RobotClip
 from pipeline.robot import (
@@ -66,6 +66,8 @@ from pipeline.robot import (
     ROOT_QUAT,
 )
 from pipeline.rotations import quat_mat
+from pipeline.terms.fall import fallen
+from pipeline.terms.layout import SUBSTEPS
 from pipeline.terms.observations import rot6
 
 FORMAT = "lessmimic-residual-v1"

@@ -20,17 +20,14 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from physicalize.contacts import ContactSets, robot_contacts
 from physicalize.reference import Reference
 from physicalize.stepping import foot_floor_forces
 from physicalize.wbc import WholeBodyController
+from pipeline.contacts import ContactSets, robot_contacts
 from pipeline.robot import NQ_ROBOT, NUM_JOINTS, NV_ROBOT
-from pipeline.rotations import quat_mat
 from pipeline.scene import Scene, link_collision_geoms
-
-SUBSTEPS = 4
-FALL_HEIGHT_DROP = 0.30  # pelvis this far below the reference's: fallen
-FALL_TILT_COS = 0.5  # torso up-axis this far (60 degrees) from the reference torso's up-axis: fallen
+from pipeline.terms.fall import fallen
+from pipeline.terms.layout import SUBSTEPS
 
 
 @dataclass
@@ -68,15 +65,6 @@ def initial_state(
     for name, adr in scene.object_qpos_adr.items():
         qpos[adr : adr + 7] = objects[name][frame]
     return qpos, qvel
-
-
-def fallen(d: mujoco.MjData, ref_pelvis_z: float, torso: int, ref_torso_quat: np.ndarray | None = None) -> bool:
-    """Pelvis :data:`FALL_HEIGHT_DROP` below the reference, or the torso's up-axis more than 60 degrees
-    from the reference torso's (``ref_torso_quat``, wxyz; None: from the vertical). Relative tilt: a
-    reference that bends over a table or a box (> 60 degrees) is not a fall when tracked."""
-    up = d.xmat[torso].reshape(3, 3)[:, 2]
-    ref_up = np.array([0.0, 0.0, 1.0]) if ref_torso_quat is None else quat_mat(ref_torso_quat)[:, 2]
-    return bool(d.qpos[2] < ref_pelvis_z - FALL_HEIGHT_DROP or float(up @ ref_up) < FALL_TILT_COS)
 
 
 def _link_contacts(m, d, link_geoms: list[set[int]], object_geoms: set[int]) -> np.ndarray:

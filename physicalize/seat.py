@@ -27,8 +27,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from physicalize.contacts import ContactSets, robot_contacts
 from physicalize.reference import Reference
+from pipeline.contacts import ContactSets, robot_contacts
 from pipeline.foot_contact import keep_runs, widen_runs
 from pipeline.robot import NQ_ROBOT, NV_ROBOT
 from pipeline.scene import nearest_geom_pair

@@ -35,6 +35,7 @@ from pipeline.clip import START_PREFIX_KEY, RobotClip
 from pipeline.kinematics import qvel_from_qpos
 from pipeline.robot import FOOT_BODIES, g1_model, sole_corners
 from pipeline.rotations import slerp_wxyz, yaw_quat
+from pipeline.terms.layout import CONTROL_FPS
 
 SETTLE_S = 0.5  # s: the stance held still
 BLEND_S = 1.0  # s: from the stance into the clip's first frame
@@ -56,7 +57,7 @@ def starts_clean(clip: RobotClip) -> bool:
 
 def _swing_feet(q: np.ndarray) -> list[int]:
     """The feet (0 left, 1 right) of pose ``q`` with a sole corner above :data:`SWING_M`."""
-    corners = build_reference(g1_model(), q[None], 50.0).corners[0]  # (2, 4, 3) sole corners
+    corners = build_reference(g1_model(), q[None], float(CONTROL_FPS)).corners[0]  # (2, 4, 3) sole corners
     return [k for k in range(2) if corners[k, :, 2].max() > SWING_M]
 
 

@@ -14,9 +14,9 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 
-from physicalize.contacts import ContactSets, robot_contacts
 from physicalize.target import Target
 from physicalize.wbc_config import WBCConfig
+from pipeline.contacts import ContactSets, robot_contacts
 
 # the CoM target moves by this fraction of the stance feet's landing shift (without it the plan kept pulling the CoM
 # toward the reference footsteps, the next landing was shifted further, and a 20 N side push diverged)

@@ -26,8 +26,9 @@ from physicalize.reference import Reference, build_reference, place_on_floor
 from pipeline.robot import FOOT_BODIES, NQ_ROBOT, default_qpos
 from pipeline.rotations import yaw_quat
 from pipeline.scene import Scene
+from pipeline.terms.layout import CONTROL_FPS
 
-FPS = 50.0
+FPS = float(CONTROL_FPS)
 
 
 def _smooth(s: np.ndarray) -> np.ndarray:

@@ -30,9 +30,10 @@ from dataclasses import asdict, dataclass
 import mujoco
 import numpy as np
 
-from physicalize.rollout import SUBSTEPS, Rollout
+from physicalize.rollout import Rollout
 from pipeline.robot import FOOT_BODIES, G1_JOINT_NAMES, G1_LINK_NAMES, JOINTS_QPOS, NQ_ROBOT
 from pipeline.scene import Scene
+from pipeline.terms.layout import SUBSTEPS
 
 LOADED_N = 50.0
 LIMIT_TOL = 0.02

@@ -53,7 +53,6 @@ import numpy as np
 from qpsolvers import solve_qp
 
 from physicalize import seat, wbc_rows
-from physicalize.contacts import ContactSets, robot_contacts
 from physicalize.object_loop import ObjectLoop, contact_frame
 from physicalize.seat import SupportPoint
 from physicalize.stepping import Stepping
@@ -68,6 +67,7 @@ from physicalize.wbc_qp import (
     torque_map,
     with_slack,
 )
+from pipeline.contacts import ContactSets, robot_contacts
 from pipeline.robot import (
     G1_JOINT_NAMES,
     HAND_BODIES,

@@ -41,10 +41,10 @@ import trimesh
 
 from pipeline.collision_mesh import collision_parts, load_mesh
 from pipeline.geometry import Chair, MeshGeometry, ObjectGeometry, ObjectPhysics, Primitive
-from pipeline.robot import G1_JOINT_NAMES, ActuatorProfile, actuator_profile, g1_spec
+from pipeline.robot import G1_JOINT_NAMES, HAND_BODIES, ActuatorProfile, actuator_profile, g1_spec
+from pipeline.terms.layout import PHYSICS_TIMESTEP
 from pipeline.xp import namespace
 
-PHYSICS_TIMESTEP = 0.005
 IMPRATIO = 10.0
 OBJECT_PRIORITY = 2
 _FOOT_PREFIXES = tuple(f"{s}_foot" for s in ("left", "right"))
@@ -228,7 +228,7 @@ def add_floor_pairs(
 
 def object_spec(obj: SceneObject) -> mujoco.MjSpec:
     """One object alone as an ``MjSpec`` (its body, free joint and collision geoms as :func:`build_spec` adds
-    them): an mjlab entity of :mod:`train.mjlab_env`."""
+    them): an mjlab entity of :mod:`train.envs.mjlab.env`."""
     spec = mujoco.MjSpec()
     _add_object(spec, obj)
     return spec
@@ -310,6 +310,12 @@ def link_collision_geoms(model: mujoco.MjModel, body: str) -> list[int]:
             return geoms + extra
         level = [b for b in range(model.nbody) if model.body_parentid[b] in level and b not in level]
     raise ValueError(f"body {body!r} has no collision geoms below it")
+
+
+def hand_geoms(model: mujoco.MjModel) -> list[list[int]]:
+    """Collision geoms of each hand (left, right): :func:`link_collision_geoms` of
+    :data:`pipeline.robot.HAND_BODIES`."""
+    return [link_collision_geoms(model, b) for b in HAND_BODIES]
 
 
 def nearest_geom_pair(

@@ -1,13 +1,14 @@
-"""Long-horizon chains (train.chains) on the default corpus: real datasets, a BC policy trained briefly, real MuJoCo."""
+"""Long-horizon chains (train.evaluation.chains) on the default corpus: real datasets, a BC policy trained briefly,
+real MuJoCo."""
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from train.actors import PolicyActor
-from train.chains import ENDINGS, ChainConfig, evaluate_chains, markdown, relocated, run_chains
-from train.chains import _yaw as heading_yaw
-from train.env import InteractionEnv
+from train.envs.cpu.env import InteractionEnv
+from train.evaluation.chains import ENDINGS, ChainConfig, evaluate_chains, markdown, relocated, run_chains
+from train.evaluation.chains import _yaw as heading_yaw
 from train.policy import load_policy
 
 
@@ -42,7 +43,7 @@ def test_a_relocated_episode_starts_where_asked_and_keeps_its_object_where_it_wa
 
 def test_a_chain_goes_on_from_the_robots_state_into_the_next_task(corpus):
     """Switching to the next task keeps the robot's state and places the next episode where the robot stands."""
-    from train.chains import _switch
+    from train.evaluation.chains import _switch
 
     episodes, policy = corpus
     pick, sit = (next(x for x in episodes if x.task == t) for t in ("PickUp", "SitStand"))

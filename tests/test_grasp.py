@@ -12,7 +12,7 @@ import pytest
 
 from physicalize.grasp import GraspConfig, grasp_schedule
 from physicalize.grasp_force import contact_friction, normal_force, press_force
-from physicalize.hand_reach import hand_geoms, hand_offsets
+from physicalize.hand_reach import hand_offsets
 from physicalize.object_loop import LoopGains
 from physicalize.reference import build_reference, place_on_floor
 from physicalize.rollout import initial_state, simulate
@@ -21,7 +21,7 @@ from physicalize.wbc_config import WBCConfig
 from pipeline.geometry import ObjectPhysics, Primitive
 from pipeline.robot import G1_JOINT_NAMES, HAND_BODIES, default_qpos
 from pipeline.rotations import orientation_error
-from pipeline.scene import SceneObject, build_scene
+from pipeline.scene import SceneObject, build_scene, hand_geoms
 
 BOX_HALF = (0.10, 0.12, 0.08)
 BOX_MASS = 1.5

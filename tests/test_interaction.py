@@ -10,7 +10,8 @@ from scipy.spatial.transform import Rotation
 from pipeline.distance.field import ObjectField
 from pipeline.geometry import Primitive
 from pipeline.rotations import wxyz_from_rotation
-from pipeline.terms.interaction import demo_features, feature_names, interaction_features, surface_point_velocity
+from pipeline.terms.interaction import demo_features, interaction_features, surface_point_velocity
+from pipeline.terms.layout import feature_names
 
 
 def _unit(a):

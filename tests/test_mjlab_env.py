@@ -9,11 +9,12 @@ import torch
 
 from pipeline.errors import InputError
 from pipeline.geometry import Primitive
-from train import rewards as R
-from train.env import EnvConfig, InteractionEnv
-from train.mjlab_object import MODEL_FIELDS
-from train.post_env import PostEnvConfig, task_rewards
-from train.randomize import RandomizationConfig, draw, stack
+from train.envs.cpu.env import EnvConfig, InteractionEnv
+from train.envs.cpu.rewards import task_rewards
+from train.envs.cpu.vec_env import PostEnvConfig
+from train.envs.mjlab.object import MODEL_FIELDS
+from train.mdp import rewards as R
+from train.mdp.randomize import RandomizationConfig, draw, stack
 
 pytestmark = pytest.mark.slow
 
@@ -28,7 +29,7 @@ def episodes(bc_corpus):
 
 @pytest.fixture(scope="module")
 def mjlab_env(episodes):
-    from train.mjlab_env import MjlabPostTrainEnv
+    from train.envs.mjlab.env import MjlabPostTrainEnv
 
     env = MjlabPostTrainEnv(episodes, 3, PostEnvConfig(envs=2, seed=1, randomization=NO_NOISE), device="cpu")
     yield env
@@ -40,7 +41,8 @@ def test_the_same_state_gives_the_same_observation_and_reward(episodes, mjlab_en
     """Two worlds run the two ``kinds`` of object (a box episode, a chair's (SitStand), a box drawn as a cylinder),
     the first without restitution, the second with a contact spring, each at its own drawn per-axis scale: the model
     fields of its object are the CPU scene's, and so are the observations and the reward terms."""
-    from train import mjlab_terms as M
+    from train.envs.mjlab import observations as O
+    from train.envs.mjlab import rewards as M
 
     rng = np.random.default_rng(5)
     box, chair = (next(i for i, e in enumerate(episodes) if (e.task == "SitStand") == c) for c in (False, True))
@@ -67,9 +69,9 @@ def test_the_same_state_gives_the_same_observation_and_reward(episodes, mjlab_en
         env.action_manager.process_action(torch.as_tensor(a, dtype=torch.float32))
     links = EnvConfig().links
     got = {
-        "proprio": M.proprio(env),
-        "root_command": M.root_command(env, worlds),
-        "df": M.interaction(env, worlds, links),
+        "proprio": O.proprio(env),
+        "root_command": O.root_command(env, worlds),
+        "df": O.interaction(env, worlds, links),
     }
     native, warp = cpu.slots[0].scene.model.opt, env.sim.mj_model.opt  # the solver options mjlab_env._options copies
     for name in ("timestep", "integrator", "cone", "impratio"):
@@ -134,16 +136,16 @@ def _check_object_fields(env, cpu) -> None:
         for field, got, want in pairs:
             np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7, err_msg=f"world {i} ({k} parts) {field}")
         pads = np.setdiff1d(g, gi)
-        assert (mine["geom_size"][i, pads] <= 1e-4).all()  # the slots this world does not use (train.mjlab_object)
+        assert (mine["geom_size"][i, pads] <= 1e-4).all()  # the slots this world does not use (train.envs.mjlab.object)
 
 
 def test_a_restart_sizes_each_world_by_its_episode_and_draw(bc_corpus):
-    """:meth:`train.mjlab_object.Shapes.at` (no mjlab; here for the corpus this file builds): a chair world takes
+    """:meth:`train.envs.mjlab.object.Shapes.at` (no mjlab; here for the corpus this file builds): a chair world takes
     :meth:`Chair.scaled`'s parts; a box world its box and five pads at its centre; a box drawn as a cylinder the
     box's mean scaled half-width and half-height, every box part a pad; a chair's cylinder draw is ignored.
     :meth:`Shapes.floor_shift` raises a box (and its cylinder) by its half-height's change, never a chair."""
     from pipeline.geometry import Chair
-    from train.mjlab_object import PAD_HALF, Shapes
+    from train.envs.mjlab.object import PAD_HALF, Shapes
 
     episodes = bc_corpus[0]
     box, chair = (next(i for i, e in enumerate(episodes) if (e.task == "SitStand") == c) for c in (False, True))
@@ -166,9 +168,10 @@ def test_a_restart_sizes_each_world_by_its_episode_and_draw(bc_corpus):
 
 
 def test_a_step_restarts_and_hands_rsl_rl_what_the_cpu_environment_does(mjlab_env):
-    """``policy`` is 3-step windows in flatten_windows' layout (a start fills its window), ``critic`` the current
+    """``policy`` is 3-step windows in ObservationLayout.flatten's order (a start fills its window), ``critic`` the
+    current
     step; the style extras are the DF features and the AMP transition; a finished episode restarts."""
-    from train import mjlab_terms as M
+    from train.envs.mjlab import observations as O
 
     env = mjlab_env
     env.env.reset()
@@ -179,7 +182,7 @@ def test_a_step_restarts_and_hands_rsl_rl_what_the_cpu_environment_does(mjlab_en
     for w, c, d in zip(windows, torch.split(obs["critic"], list(dims), dim=1), dims):
         torch.testing.assert_close(w.reshape(2, 3, d), c[:, None].expand(2, 3, d))
     worlds, links = env.worlds, EnvConfig().links  # the managers' terms read the episodes the restarts wrote
-    direct = [M.proprio(env.env), M.root_command(env.env, worlds), M.interaction(env.env, worlds, links)]
+    direct = [O.proprio(env.env), O.root_command(env.env, worlds), O.interaction(env.env, worlds, links)]
     torch.testing.assert_close(obs["critic"], torch.cat(direct, 1))
     assert len(set(worlds.episode.tolist())) == 2  # the two worlds run two episodes (seed 1)
     hold = obs["critic"][:, :29].clone()
@@ -197,7 +200,7 @@ def test_a_step_restarts_and_hands_rsl_rl_what_the_cpu_environment_does(mjlab_en
 
 
 def test_an_object_neither_box_nor_chair_is_a_one_line_error(bc_corpus):
-    from train.mjlab_terms import check_episodes
+    from train.envs.mjlab.worlds import check_episodes
 
     e = bc_corpus[0][0]
     robot = e.simulated.robot

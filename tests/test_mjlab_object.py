@@ -1,4 +1,4 @@
-"""The mjlab worlds' objects (:mod:`train.mjlab_object`) against what MuJoCo's compiler derives for the same object
+"""The mjlab worlds' objects (:mod:`train.envs.mjlab.object`) against what MuJoCo's compiler derives for the same object
 in the native scene: a box, a cylinder and chairs at drawn per-axis scales (torch on the CPU; no mjlab needed)."""
 
 import mujoco
@@ -8,7 +8,7 @@ import torch
 
 from pipeline.geometry import Chair, Primitive, chair_boxes, chair_scaled
 from pipeline.scene import ObjectPhysics, SceneObject, build_scene
-from train.mjlab_object import PAD_HALF, Parts, rigid_body, slots
+from train.envs.mjlab.object import PAD_HALF, Parts, rigid_body, slots
 
 SCALES = [(1.0, 1.0, 1.0), (0.4, 1.6, 0.9), (1.5, 0.5, 1.3)]
 
@@ -71,7 +71,8 @@ def test_a_box_with_pads_is_the_box(scale):
 
 
 def test_a_cylinder_with_pads_is_the_cylinder():
-    """A box drawn as a cylinder (train.randomize.vary_shape): its box parts are pads; MuJoCo's cylinder primitive."""
+    """A box drawn as a cylinder (train.mdp.randomize.vary_shape): its box parts are pads; MuJoCo's cylinder
+    primitive."""
     half = np.full((6, 3), PAD_HALF)
     mine = _mine(half, np.zeros((6, 3)), np.zeros(6, bool), 2.5, cylinder=(0.12, 0.2))
     native = _native(Primitive("cylinder", (0.12, 0.2)), 2.5)

@@ -5,9 +5,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pipeline.rotations import wxyz_from_rotation
+from pipeline.terms.layout import PROPRIO_NAMES, ROOT_COMMAND_NAMES
 from pipeline.terms.observations import (
-    PROPRIO_NAMES,
-    ROOT_COMMAND_NAMES,
     previous_actions,
     projected_gravity,
     proprioception,

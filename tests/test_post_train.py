@@ -9,10 +9,11 @@ import pytest
 import torch
 
 from pipeline.errors import InputError
+from pipeline.terms.layout import AMP_STATE
 from train.aip import PostTrainConfig, post_train, reference_buffers
+from train.envs.cpu.vec_env import PostEnvConfig, PostTrainEnv
 from train.episodes import load_episodes
 from train.policy import load_policy
-from train.post_env import AMP_STATE, PostEnvConfig, PostTrainEnv
 from train.rl_model import InteractionActor
 
 
@@ -108,7 +109,7 @@ def test_the_critic_warms_up_alone_at_its_own_rate(bc_policy):
 
 def test_ablations_drop_what_they_name_and_unknown_ones_are_refused(bc_policy, tmp_path, capsys):
     from lessmimic.cli import main
-    from train.evaluate import EvalConfig, scale_line, scale_note
+    from train.evaluation.table2 import EvalConfig, scale_line, scale_note
 
     row = post_train("train", bc_policy, tmp_path, replace(SMOKE, ablation="-AIP"))
     assert "aip_reward" not in row and "amp_reward" in row
@@ -126,8 +127,8 @@ def test_ablations_drop_what_they_name_and_unknown_ones_are_refused(bc_policy, t
 def test_an_episodes_variation_reaches_the_scene_the_initial_state_and_the_command(bc_policy):
     import mujoco
 
-    from train.env import InteractionEnv
-    from train.randomize import Variation
+    from train.envs.cpu.env import InteractionEnv
+    from train.mdp.randomize import Variation
 
     episode = next(e for e in load_episodes("train") if e.task == "PickUp")
     v = Variation(cylinder=True, mass_factor=1.5, friction_factor=0.5, restitution=0.2, robot_offset=(0.03, 0, 0),

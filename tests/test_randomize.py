@@ -1,4 +1,4 @@
-"""The six post-training randomisations (train.randomize), each changing what it says and nothing else."""
+"""The six post-training randomisations (train.mdp.randomize), each changing what it says and nothing else."""
 
 from dataclasses import replace
 
@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.clip import ObjectTrack
 from pipeline.geometry import Primitive
-from train.randomize import (
+from train.mdp.randomize import (
     RandomizationConfig,
     Variation,
     actuation_noise,
@@ -101,7 +101,7 @@ def test_the_gpu_backend_draws_and_perturbs_with_the_same_functions_in_torch():
     the same scenes in numpy and torch."""
     import torch
 
-    from train.randomize import draw_batch, perturbed_initial_state, stack
+    from train.mdp.randomize import draw_batch, perturbed_initial_state, stack
 
     cfg = RandomizationConfig()
     b = draw_batch(cfg, 500, torch.Generator().manual_seed(3))

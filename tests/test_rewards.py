@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from train.rewards import (
+from train.mdp.rewards import (
     RewardWeights,
     action_rate,
     joint_limits,

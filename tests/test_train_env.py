@@ -13,9 +13,9 @@ from pipeline.dataset.read import episode_ranges, read_columns
 from pipeline.errors import InputError
 from pipeline.stage.paths import stage_dir
 from train.actors import TeacherActor
-from train.env import InteractionEnv
+from train.envs.cpu.env import InteractionEnv
 from train.episodes import load_episodes, scaled_objects
-from train.evaluate import EvalConfig, evaluate, markdown, scale_line, scale_note
+from train.evaluation.table2 import EvalConfig, evaluate, markdown, scale_line, scale_note
 from train.teacher import Teacher
 
 
@@ -77,7 +77,7 @@ def test_stepping_is_deterministic_and_threads_change_nothing(corpus):
     actions = [corpus[0].simulated.action[t] + rng.normal(0, 0.05, 29) for t in range(30)]
     finals = []
     for threads in (1, 2):
-        from train.env import EnvConfig
+        from train.envs.cpu.env import EnvConfig
 
         env = InteractionEnv(EnvConfig(threads=threads))
         env.reset([(corpus[0], 1.0), (corpus[2], 1.0)])

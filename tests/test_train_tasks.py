@@ -4,7 +4,7 @@ threshold and fails just short of it."""
 import numpy as np
 import pytest
 
-from train.tasks import Rules, StepFacts, TaskMeter
+from train.mdp.tasks import Rules, StepFacts, TaskMeter
 
 FPS = 50.0
 

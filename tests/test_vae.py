@@ -12,8 +12,8 @@ from pipeline.dataset import Episode, Feature, write_dataset
 from pipeline.dataset.card import DatasetCard
 from pipeline.errors import InputError
 from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES
-from pipeline.terms.interaction import DF_PARTS, feature_names, interaction_features
-from pipeline.terms.observations import PROPRIO_NAMES, ROOT_COMMAND_NAMES
+from pipeline.terms.interaction import interaction_features
+from pipeline.terms.layout import DF_PARTS, PROPRIO_NAMES, ROOT_COMMAND_NAMES, feature_names
 from train.vae import DFVAE, VAEConfig, evaluate_vae, load_vae, split_episodes, train_vae
 
 torch.set_num_threads(1)

@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 from pipeline.errors import InputError
-from train.env import InteractionEnv, Obs
+from train.envs.cpu.env import InteractionEnv, Obs
 from train.teacher import Teacher, episode_reference
 
 

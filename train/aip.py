@@ -4,21 +4,22 @@ priors. Read top to bottom:
 1. :class:`AdversarialPPO` is rsl_rl's PPO plus the priors. After every environment step it adds the style rewards
    to the task reward, ``r = r_task + w_int r_interact + w_mot r_style`` with ``r = max(0, 1 - 0.25 (D - 1)^2)``:
    the **AIP** discriminator reads the interaction latent ``z = VAE.encode(u_t)`` of the state reached, the **AMP**
-   discriminator the robot's state transition (:data:`train.post_env.AMP_STATE`). After PPO's own update it trains
+   discriminator the robot's state transition (:data:`pipeline.terms.layout.AMP_STATE`). After PPO's own update it
+   trains
    each discriminator (:mod:`train.discriminator`, Eq. 4 with a gradient penalty) on the iteration's policy
    samples against its reference buffer, at the paper's 2e-4;
 2. :func:`reference_buffers`: ``B_ref`` of the AIP is the VAE latents of every frame of the valid episodes of the
    features dataset (the pre-training data); the AMP's is their consecutive-frame transitions;
-3. :func:`post_train` builds the restarting environment (:class:`train.post_env.PostTrainEnv` on the CPU, or
-   :class:`train.mjlab_env.MjlabPostTrainEnv` on a GPU with ``backend="mjlab"``; the six randomisations of
-   :mod:`train.randomize`), the actor (:class:`train.rl_model.InteractionActor`, initialised
+3. :func:`post_train` builds the restarting environment (:class:`train.envs.cpu.vec_env.PostTrainEnv` on the CPU, or
+   :class:`train.envs.mjlab.env.MjlabPostTrainEnv` on a GPU with ``backend="mjlab"``; the six randomisations of
+   :mod:`train.mdp.randomize`), the actor (:class:`train.rl_model.InteractionActor`, initialised
    from ``policy.pt``), an MLP critic (rsl_rl's, normalised inputs), and runs ``iterations`` of:
    ``steps_per_env`` steps of rollout, returns (GAE), PPO update, discriminator update; a row of
    ``post_log.jsonl`` per iteration, and ``policy.pt`` (an interaction-policy checkpoint that ``lessmimic eval``
    scores like any other) after each.
 
 Ablations (:mod:`train.ablation`): ``-AIP`` drops the interaction prior, ``-Rand`` every randomisation
-(:mod:`train.randomize`); ``-Syn`` and ``-Trans`` post-train their own pre-training run in the same way.
+(:mod:`train.mdp.randomize`); ``-Syn`` and ``-Trans`` post-train their own pre-training run in the same way.
 """
 
 from __future__ import annotations
@@ -41,19 +42,20 @@ from pipeline.dataset.read import episode_ranges, read_columns
 from pipeline.errors import InputError
 from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
 from pipeline.stage.paths import stage_dir
+from pipeline.terms.layout import AMP_STATE, DF, PROPRIO
 from train.ablation import POST_TRAINING
 from train.discriminator import Discriminator, DiscriminatorConfig
+from train.envs.cpu.vec_env import PostEnvConfig, PostTrainEnv
 from train.episodes import load_episodes
-from train.policy import PROPRIO_COLUMN, load_policy, save_policy
-from train.post_env import AMP_STATE, PostEnvConfig, PostTrainEnv
-from train.randomize import RandomizationConfig
-from train.rewards import RewardWeights, lsgan_reward
+from train.mdp.randomize import RandomizationConfig
+from train.mdp.rewards import RewardWeights, lsgan_reward
+from train.policy import load_policy, save_policy
 from train.rl_model import InteractionActor
-from train.vae import DF_COLUMN, DFVAE
+from train.vae import DFVAE
 
 BACKENDS = ("cpu", "mjlab")
-"""Where the environments step: native MuJoCo on the CPU (:mod:`train.post_env`) or mjlab's MuJoCo Warp on a GPU
-(:mod:`train.mjlab_env`, the paper's scale)."""
+"""Where the environments step: native MuJoCo on the CPU (:mod:`train.envs.cpu.vec_env`) or mjlab's MuJoCo Warp on a GPU
+(:mod:`train.envs.mjlab.env`, the paper's scale)."""
 
 
 @dataclass(frozen=True)
@@ -175,15 +177,15 @@ def reference_buffers(name: str, vae: DFVAE) -> dict[str, torch.Tensor]:
     dataset (module docstring)."""
     root = stage_dir(name, "features")
     episodes = load_episodes(name, valid_only=False)
-    cols = {k: np.array(v) for k, v in read_columns(root, [DF_COLUMN, PROPRIO_COLUMN]).items()}  # writable
+    cols = {k: np.array(v) for k, v in read_columns(root, [DF, PROPRIO]).items()}  # writable
     starts, ends, _ = episode_ranges(root)
     latents, transitions = [], []
     for e, a, b in zip(episodes, starts, ends):
         if not e.simulated.validation.get("valid", False):
             continue
         with torch.no_grad():
-            latents.append(vae.encode(torch.as_tensor(cols[DF_COLUMN][a:b], dtype=torch.float32)))
-        s = cols[PROPRIO_COLUMN][a:b, AMP_STATE]
+            latents.append(vae.encode(torch.as_tensor(cols[DF][a:b], dtype=torch.float32)))
+        s = cols[PROPRIO][a:b, AMP_STATE]
         transitions.append(torch.as_tensor(np.concatenate([s[:-1], s[1:]], axis=1), dtype=torch.float32))
     if not latents:
         raise InputError(root, "validation.valid", "no valid episode to build the reference buffers from")
@@ -212,7 +214,7 @@ def build(name: str, policy_path: str | Path, config: PostTrainConfig, device: s
         env_cfg = replace(env_cfg, randomization=RandomizationConfig.off())
     history = load_policy(policy_path).layout.history
     if config.backend == "mjlab":
-        from train.mjlab_env import MjlabPostTrainEnv, runnable_episodes
+        from train.envs.mjlab.env import MjlabPostTrainEnv, runnable_episodes
 
         env = MjlabPostTrainEnv(runnable_episodes(load_episodes(name)), history, env_cfg, device)
     else:

@@ -34,14 +34,11 @@ from pipeline.dataset.read import episode_ranges
 from pipeline.dataset.windows import WindowDataset
 from pipeline.errors import InputError
 from pipeline.stage.atomic import write_json_atomic
-from pipeline.terms.interaction import DF_PARTS, feature_names
+from pipeline.terms import layout as L
+from pipeline.terms.layout import DF_PARTS, feature_names
 from train.normalize import Normalizer
 from train.policy import (
-    ACTION_COLUMN,
     COLUMNS,
-    DF_COLUMN,
-    PROPRIO_COLUMN,
-    ROOT_COMMAND_COLUMN,
     InteractionPolicy,
     PolicyConfig,
     dataset_layout,
@@ -120,9 +117,7 @@ class WindowTensors:
         remap = torch.full((len(ep),), -1, dtype=torch.int64)
         remap[keep_t] = torch.arange(len(keep_t))
         frame = {k: ds.data[k][keep_t] for k in COLUMNS}
-        return cls(
-            frame[PROPRIO_COLUMN], frame[ROOT_COMMAND_COLUMN], frame[DF_COLUMN], remap[rows], frame[ACTION_COLUMN]
-        )
+        return cls(frame[L.PROPRIO], frame[L.ROOT_COMMAND], frame[L.DF], remap[rows], frame[L.ACTION])
 
     @classmethod
     def from_dataset(cls, root: str | Path, history: int, episodes: Sequence[int] | None = None) -> WindowTensors:

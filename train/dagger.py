@@ -42,7 +42,7 @@ from tqdm import tqdm
 from pipeline.stage.atomic import write_bytes_atomic
 from train.actors import PolicyActor, TeacherActor
 from train.bc import BCConfig, WindowTensors, fit
-from train.env import EnvConfig, InteractionEnv
+from train.envs.cpu.env import EnvConfig, InteractionEnv
 from train.episodes import Episode
 from train.policy import InteractionPolicy, load_policy, save_policy
 

@@ -9,7 +9,7 @@ Loss (Eq. 4): ``L_D = E_ref[(D(x) - 1)^2] + E_pi[(D(x) + 1)^2] + w_gp E_ref[||gr
 penalty on the reference samples is the one HDMI and PhysHSI add to this LSGAN form (FIELD-NOTES): without it the
 discriminator separates the two sets with a steep boundary and its reward saturates to 0 for every policy sample,
 which gives PPO no gradient; ``gp_weight`` 0 removes it. Reward: ``max(0, 1 - 0.25 (D(x) - 1)^2)``
-(:func:`train.rewards.lsgan_reward`). Inputs are standardised by the reference buffer's statistics, stored with
+(:func:`train.mdp.rewards.lsgan_reward`). Inputs are standardised by the reference buffer's statistics, stored with
 the weights.
 """
 
@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from train.mdp.rewards import lsgan_reward
 from train.normalize import Normalizer
-from train.rewards import lsgan_reward
 from train.vae import mlp
 
 

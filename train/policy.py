@@ -33,11 +33,12 @@ from pipeline.dataset.read import dataset_actuator_profile
 from pipeline.errors import InputError
 from pipeline.robot import DEFAULT_PROFILE
 from pipeline.stage.atomic import write_bytes_atomic
+from pipeline.terms import layout as L
 from train.normalize import MIN_STD, Normalizer
-from train.vae import DF_COLUMN, DFVAE, df_links, mlp, require_columns
+from train.vae import DFVAE, df_links, mlp, require_columns
 
-PROPRIO_COLUMN, ROOT_COMMAND_COLUMN, ACTION_COLUMN = "observation.proprio", "observation.root_command", "action"
-COLUMNS = (PROPRIO_COLUMN, ROOT_COMMAND_COLUMN, DF_COLUMN, ACTION_COLUMN)
+COLUMNS = (L.PROPRIO, L.ROOT_COMMAND, L.DF, L.ACTION)
+"""What a policy is trained on, per window step (:mod:`pipeline.terms.layout`)."""
 POLICY_FORMAT = "lessmimic.interaction_policy/1"
 
 
@@ -48,7 +49,7 @@ class PolicyConfig:
     ``latent``: the VAE's z size; ``obs_clip``: normalised proprio / root command clipped to +-obs_clip."""
 
     backbone: str = "transformer"
-    history: int = 5
+    history: int = L.HISTORY
     d_model: int = 128
     layers: int = 2
     heads: int = 4
@@ -75,15 +76,21 @@ class PolicyLayout:
     sizes, the ``actuator_profile`` its joint targets are meant for, and the ``history`` length l."""
 
     links: tuple[str, ...]
-    proprio_dim: int = 93
-    root_command_dim: int = 12
-    action_dim: int = 29
+    proprio_dim: int = L.PROPRIO_DIM
+    root_command_dim: int = L.ROOT_COMMAND_DIM
+    action_dim: int = L.ACTION_DIM
     actuator_profile: str = DEFAULT_PROFILE
-    history: int = 5
+    history: int = L.HISTORY
+
+    @property
+    def observation(self) -> L.ObservationLayout:
+        """The observation this policy reads (its windows, flat or split:
+        :class:`pipeline.terms.layout.ObservationLayout`)."""
+        return L.ObservationLayout(self.links, self.history, self.proprio_dim, self.root_command_dim)
 
     @property
     def df_dim(self) -> int:
-        return 10 * len(self.links)
+        return self.observation.df_dim
 
     def to_dict(self) -> dict:
         return {**asdict(self), "links": list(self.links)}
@@ -103,15 +110,15 @@ class PolicyLayout:
         return None
 
 
-def dataset_layout(root: str | Path, history: int = 5) -> PolicyLayout:
+def dataset_layout(root: str | Path, history: int = L.HISTORY) -> PolicyLayout:
     """The layout a policy trained on the features dataset at ``root`` has (one-line error for a missing column)."""
     info = require_columns(root, COLUMNS)
     dim = {c: int(info["features"][c]["shape"][0]) for c in COLUMNS}
     return PolicyLayout(
-        links=df_links(info["features"][DF_COLUMN]["names"], root),
-        proprio_dim=dim[PROPRIO_COLUMN],
-        root_command_dim=dim[ROOT_COMMAND_COLUMN],
-        action_dim=dim[ACTION_COLUMN],
+        links=df_links(info["features"][L.DF]["names"], root),
+        proprio_dim=dim[L.PROPRIO],
+        root_command_dim=dim[L.ROOT_COMMAND],
+        action_dim=dim[L.ACTION],
         actuator_profile=dataset_actuator_profile(root),
         history=int(history),
     )

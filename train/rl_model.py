@@ -2,7 +2,8 @@
 rsl_rl's PPO (5.4.2 has MLP, CNN and RNN models only; a model class is resolved by name, as mjlab does for its CNN).
 
 The actor reads the ``policy`` observation group, one flat row per environment holding the ``l``-step windows
-``[proprio (l x P), root_command (l x C), df (l x 10K)]`` (:func:`flatten_windows`), and acts with a diagonal
+``[proprio (l x P), root_command (l x C), df (l x 10K)]`` (:meth:`pipeline.terms.layout.ObservationLayout.flatten`),
+and acts with a diagonal
 Gaussian around the policy's joint targets:
 
     a ~ N(mu, sigma^2),   mu = denormalize(pi(o_(t-l+1..t)))   (absolute joint position targets, rad)
@@ -14,32 +15,13 @@ The VAE stays frozen (paper App. B: only the policy is fine-tuned).
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 from rsl_rl.models import MLPModel
 from rsl_rl.modules.distribution import GaussianDistribution
 from tensordict import TensorDict
 from torch import nn
 
-from train.policy import InteractionPolicy, PolicyLayout, load_policy
-
-
-def window_dims(layout: PolicyLayout) -> tuple[int, int, int]:
-    """The widths of one step's ``proprio``, ``root_command`` and ``df`` terms."""
-    return layout.proprio_dim, layout.root_command_dim, layout.df_dim
-
-
-def flatten_windows(proprio: np.ndarray, root_command: np.ndarray, df: np.ndarray) -> np.ndarray:
-    """(N, l (P + C + 10K)): the three ``(N, l, dim)`` windows, each flattened, side by side."""
-    return np.concatenate([proprio.reshape(len(proprio), -1), root_command.reshape(len(proprio), -1),
-                           df.reshape(len(proprio), -1)], axis=1)  # fmt: skip
-
-
-def split_windows(flat: torch.Tensor, layout: PolicyLayout) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """The inverse of :func:`flatten_windows`: ``(B, l, dim)`` per term."""
-    steps, dims = layout.history, window_dims(layout)
-    parts = torch.split(flat, [steps * d for d in dims], dim=-1)
-    return tuple(p.reshape(len(flat), steps, d) for p, d in zip(parts, dims))
+from train.policy import InteractionPolicy, load_policy
 
 
 class InteractionActor(MLPModel):
@@ -62,7 +44,7 @@ class InteractionActor(MLPModel):
         layout = self.policy.layout
         self.obs_groups = list(obs_groups[obs_set])
         self.obs_dim = sum(int(obs[g].shape[-1]) for g in self.obs_groups)
-        want = layout.history * sum(window_dims(layout))
+        want = layout.observation.flat_dim
         if self.obs_dim != want or output_dim != layout.action_dim:
             raise ValueError(
                 f"{policy_path}: the policy reads {want} and drives {layout.action_dim}, "
@@ -76,7 +58,7 @@ class InteractionActor(MLPModel):
         return torch.cat([obs[g] for g in self.obs_groups], dim=-1)
 
     def forward(self, obs: TensorDict, masks=None, hidden_state=None, stochastic_output: bool = False) -> torch.Tensor:
-        windows = split_windows(self.get_latent(obs), self.policy.layout)
+        windows = self.policy.layout.observation.split(self.get_latent(obs))
         mean = self.policy.norm["action"].denormalize(self.policy(*windows))
         if stochastic_output:
             self.distribution.update(mean)

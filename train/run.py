@@ -23,6 +23,7 @@ from pathlib import Path
 from pipeline.errors import InputError
 from pipeline.stage.atomic import write_json_atomic
 from pipeline.stage.paths import stage_dir
+from pipeline.terms.layout import HISTORY
 from train.bc import BCConfig, WindowTensors, train_bc
 from train.dagger import DAggerConfig, dagger, read_log
 from train.episodes import load_episodes
@@ -36,7 +37,7 @@ class TrainConfig:
 
     name: str = "corpus"  # the corpus: datasets/<name>/{features,physicalized,retargeted}
     backbone: str = "transformer"
-    history: int = 5
+    history: int = HISTORY
     vae_steps: int = 2000
     bc_steps: int = 8000
     batch: int = 256

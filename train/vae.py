@@ -28,10 +28,9 @@ from torch import nn
 from pipeline.dataset.read import episode_ranges, read_columns, read_info
 from pipeline.errors import InputError
 from pipeline.stage.atomic import write_bytes_atomic
-from pipeline.terms.interaction import DF_PARTS
+from pipeline.terms.layout import DF, DF_PARTS
 from train.normalize import Normalizer
 
-DF_COLUMN = "observation.df"
 VAE_FORMAT = "lessmimic.df_vae/1"
 HOLDOUT_SEED = 0  # the held-out episodes do not depend on the training seed: the VAE and BC hold out the same ones
 GROUPS = {"phi_m": ("phi",), "grad": ("grad_",), "v_norm_mps": ("v_norm_",), "v_tan_mps": ("v_tan_",)}
@@ -79,11 +78,11 @@ def df_links(names: Sequence[str], where: str | Path | None = None) -> tuple[str
     """The K link names of ``observation.df`` element names ``<link>.<part>`` (parts in :data:`DF_PARTS` order)."""
     parts = len(DF_PARTS)
     if len(names) == 0 or len(names) % parts:
-        raise InputError(where, DF_COLUMN, f"{len(names)} elements is not K x {parts}")
+        raise InputError(where, DF, f"{len(names)} elements is not K x {parts}")
     links = tuple(n.rsplit(".", 1)[0] for n in names[::parts])
     want = tuple(f"{link}.{p}" for link in links for p in DF_PARTS)
     if tuple(names) != want:
-        raise InputError(where, DF_COLUMN, f"element names are not <link>.<part> with parts {DF_PARTS}")
+        raise InputError(where, DF, f"element names are not <link>.<part> with parts {DF_PARTS}")
     return links
 
 
@@ -236,13 +235,13 @@ def train_vae(
     evaluation frames, the reconstruction RMSE on the training frames (``rmse_train``), seconds.
     """
     root, t0 = Path(features_root), time.perf_counter()
-    names = require_columns(root, [DF_COLUMN])["features"][DF_COLUMN]["names"]
+    names = require_columns(root, [DF])["features"][DF]["names"]
     df_links(names, root)
-    cols = read_columns(root, [DF_COLUMN, "episode_index"])
+    cols = read_columns(root, [DF, "episode_index"])
     train_eps, held = split_episodes(len(episode_ranges(root)[0]), config.holdout)
     ep = cols["episode_index"][:, 0]
-    u_train = cols[DF_COLUMN][np.isin(ep, train_eps)]
-    u_eval = cols[DF_COLUMN][np.isin(ep, held)] if held else cols[DF_COLUMN]
+    u_train = cols[DF][np.isin(ep, train_eps)]
+    u_eval = cols[DF][np.isin(ep, held)] if held else cols[DF]
     torch.manual_seed(config.seed)
     vae = DFVAE(names, config, Normalizer.from_array(u_train, config.min_std)).to(device)
     gen = torch.Generator(device=device).manual_seed(config.seed)

@@ -54,6 +54,7 @@ from pipeline.dataset.schema import Episode, Feature
 from pipeline.errors import InputError
 from pipeline.kinematics import qvel_from_qpos
 from pipeline.robot import G1_JOINT_NAMES, QPOS_NAMES
+from pipeline.terms.layout import ACTION
 
 QVEL_NAMES: tuple[str, ...] = ("root_vx", "root_vy", "root_vz", "root_wx", "root_wy", "root_wz") + G1_JOINT_NAMES
 DEFAULT_TASK = "humanoid whole-body motion"
@@ -197,7 +198,7 @@ def physicalized_clips_to_episodes(clips: Sequence[PhysicalizedClip]) -> tuple[l
     )
     features = [replace(f, description=sim_qvel) if f.name == "observation.qvel" else f for f in features]
     features += [
-        Feature("action", "float32", G1_JOINT_NAMES, "joint position targets held for the next 20 ms", "rad"),
+        Feature(ACTION, "float32", G1_JOINT_NAMES, "joint position targets held for the next 20 ms", "rad"),
         Feature(
             "observation.torque", "float32", G1_JOINT_NAMES, "applied actuator torques (mean over the hold)", "N m"
         ),
@@ -215,7 +216,7 @@ def physicalized_clips_to_episodes(clips: Sequence[PhysicalizedClip]) -> tuple[l
         ep.data.update(
             {
                 "observation.qvel": c.qvel,
-                "action": c.action,
+                ACTION: c.action,
                 "observation.torque": c.torque,
                 "observation.foot_force": c.foot_force,
                 "reference.state": c.reference_qpos,
@@ -231,9 +232,7 @@ def episodes_to_physicalized_clips(root: str | Path) -> list[PhysicalizedClip]:
     dataset without the simulation's columns (e.g. a retargeted one) is an :class:`InputError`."""
     info = read_info(root)
     names = info["features"]
-    missing = [
-        k for k in ("action", "observation.torque", "observation.foot_force", "reference.state") if k not in names
-    ]
+    missing = [k for k in (ACTION, "observation.torque", "observation.foot_force", "reference.state") if k not in names]
     if missing:
         raise InputError(
             root, "features", f"missing {missing}: not a physicalized dataset (run `lessmimic physicalize` first)"
@@ -246,7 +245,7 @@ def episodes_to_physicalized_clips(root: str | Path) -> list[PhysicalizedClip]:
                 robot=robot,
                 qvel=d["observation.qvel"],
                 object_vel=tuple(d[f"{episode_column(m)}.vel"] for m in ep.meta.get("objects", [])),
-                action=d["action"],
+                action=d[ACTION],
                 torque=d["observation.torque"],
                 foot_force=d["observation.foot_force"],
                 reference_qpos=d["reference.state"],

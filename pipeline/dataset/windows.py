@@ -15,6 +15,7 @@ import torch
 
 from pipeline.dataset.read import episode_ranges, read_columns, read_info
 from pipeline.errors import InputError
+from pipeline.terms.layout import HISTORY
 
 
 class WindowDataset(torch.utils.data.Dataset):
@@ -26,7 +27,7 @@ class WindowDataset(torch.utils.data.Dataset):
     feature as ``(history,)``; here it is ``(history, 1)``.
     """
 
-    def __init__(self, root: str | Path, keys: Sequence[str], history: int = 5):
+    def __init__(self, root: str | Path, keys: Sequence[str], history: int = HISTORY):
         if history < 1:
             raise ValueError(f"history must be >= 1, got {history}")
         self.root, self.keys, self.history = Path(root), tuple(keys), int(history)

@@ -20,11 +20,8 @@ Everything takes numpy arrays or torch tensors alike (RL environments compute th
 from __future__ import annotations
 
 from pipeline.rotations import rotation_rows
+from pipeline.terms.layout import DEMO_MAX_DISTANCE_M
 from pipeline.xp import concat, namespace
-
-DF_PARTS = ("phi", "grad_x", "grad_y", "grad_z", "v_norm_x", "v_norm_y", "v_norm_z", "v_tan_x", "v_tan_y", "v_tan_z")
-DEMO_PARTS = ("phi", "grad_x", "grad_y", "grad_z")
-DEMO_MAX_DISTANCE_M = 1.0
 
 
 def interaction_features(phi, grad, vel):
@@ -64,8 +61,3 @@ def demo_features(phi, grad, link_rot, max_distance: float = DEMO_MAX_DISTANCE_M
     xp = namespace(phi)
     local = xp.einsum("...ji,...j->...i", link_rot, grad)
     return concat([xp.clip(phi, None, max_distance)[..., None], local], xp, axis=-1)
-
-
-def feature_names(links, parts=DF_PARTS) -> tuple[str, ...]:
-    """Flat per-link names, ``<link>.<part>``, in the order the features are stored."""
-    return tuple(f"{link}.{p}" for link in links for p in parts)

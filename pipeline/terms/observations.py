@@ -1,5 +1,7 @@
 """Policy observation terms of a G1 trajectory, as plain functions (mjlab style).
 
+Their widths and element names are the contract of :mod:`pipeline.terms.layout`.
+
 * :func:`proprioception` (93 per frame): joint angles (29), joint velocities (29), gravity in the
   root frame (3), root angular velocity in the root frame (3), the previous frame's action (29;
   zeros at the first frame) -- the released LessMimic demo's per-frame proprio layout.
@@ -14,31 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.robot import G1_JOINT_NAMES, JOINTS_QPOS, JOINTS_QVEL, ROOT_ANG_VEL
+from pipeline.robot import JOINTS_QPOS, JOINTS_QVEL, ROOT_ANG_VEL
 from pipeline.rotations import rotation_rows
+from pipeline.terms.layout import ROOT_HORIZON_S
 from pipeline.xp import concat, namespace
-
-PROPRIO_NAMES: tuple[str, ...] = (
-    tuple(f"q.{j}" for j in G1_JOINT_NAMES)
-    + tuple(f"dq.{j}" for j in G1_JOINT_NAMES)
-    + ("gravity_x", "gravity_y", "gravity_z")
-    + ("ang_vel_x", "ang_vel_y", "ang_vel_z")
-    + tuple(f"last_action.{j}" for j in G1_JOINT_NAMES)
-)
-ROOT_COMMAND_NAMES: tuple[str, ...] = (
-    "dpos_x",
-    "dpos_y",
-    "dpos_z",
-    "rot6d_0",
-    "rot6d_1",
-    "rot6d_2",
-    "rot6d_3",
-    "rot6d_4",
-    "rot6d_5",
-    "vel_x",
-    "vel_y",
-    "vel_z",
-)
 
 
 def rot6(R):
@@ -94,12 +75,12 @@ def root_command_to(qpos, target_qpos, target_vel):
     return concat([dpos, rot6(rot), to_heading(target_vel[:, :3], yaw)], namespace(qpos), axis=1)
 
 
-def command_frames(frames: int, fps: float, horizon_s: float = 1.0) -> np.ndarray:
+def command_frames(frames: int, fps: float, horizon_s: float = ROOT_HORIZON_S) -> np.ndarray:
     """(T,) the frame ``j = min(t + horizon fps, T - 1)`` each frame's root command looks at."""
     return np.minimum(np.arange(frames) + int(round(horizon_s * fps)), frames - 1)
 
 
-def root_command(qpos: np.ndarray, qvel: np.ndarray, fps: float, horizon_s: float = 1.0) -> np.ndarray:
+def root_command(qpos: np.ndarray, qvel: np.ndarray, fps: float, horizon_s: float = ROOT_HORIZON_S) -> np.ndarray:
     """(T, 12) a clip's own root commands: :func:`root_command_to` frame ``j`` of :func:`command_frames`."""
     j = command_frames(len(qpos), fps, horizon_s)
     return root_command_to(qpos, qpos[j], qvel[j, :3])

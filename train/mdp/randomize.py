@@ -121,7 +121,7 @@ def vary_shape(o: ObjectTrack, v: Variation) -> ObjectTrack:
     """A primitive box drawn as a circular cylinder along z when ``v.cylinder``: radius the mean of the box's x and y
     half-extents, the same half-height (both at the box's scale); any other object as it is. Circular so that it is
     MuJoCo's cylinder primitive on both backends: a cylinder scaled per axis is a collision mesh, which an mjlab
-    world cannot switch to at a restart (:mod:`train.mjlab_object`)."""
+    world cannot switch to at a restart (:mod:`train.envs.mjlab.object`)."""
     g = o.geometry
     if not (v.cylinder and isinstance(g, Primitive) and g.kind == "box"):
         return o
@@ -147,7 +147,7 @@ def placed(o: ObjectTrack, v: Variation) -> tuple[float, ...]:
 def turn(pose, offset):
     """(N, 7) free-body poses ``(x y z qw qx qy qz)`` (N, 7) shifted by ``(dx, dy)`` and turned by ``dyaw`` about z,
     ``offset`` (N, 3): ``q' = (cos dyaw/2, 0, 0, sin dyaw/2) q``; numpy or torch alike (the CPU environment turns one
-    pose at a time, :mod:`train.mjlab_env` a batch)."""
+    pose at a time, :mod:`train.envs.mjlab.env` a batch)."""
     xp = namespace(pose)
     c, s = xp.cos(offset[:, 2] / 2), xp.sin(offset[:, 2] / 2)
     w, x, y, z = pose[:, 3], pose[:, 4], pose[:, 5], pose[:, 6]

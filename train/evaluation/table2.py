@@ -3,8 +3,9 @@
 Cells: PickUp at object scales 0.4 / 0.6 / 1.0 / 1.4 / 1.6, SitStand at 0.4 / 1.0 / 1.6, Push at 0.6 / 1.0 / 1.4
 (hand contact rate), Carry at 1.0 (:data:`TABLE2`). Per cell and evaluation seed, :attr:`EvalConfig.episodes`
 episodes of the task are drawn from the corpus (the seed picks them and perturbs the initial joint angles by
-:attr:`EvalConfig.joint_noise`), run at the scale in the interaction environment (:mod:`train.env`) and scored by
-:class:`train.tasks.TaskMeter`; a cell reports the mean and standard deviation over the seeds of the success
+:attr:`EvalConfig.joint_noise`), run at the scale in the interaction environment (:mod:`train.envs.cpu.env`) and scored
+by
+:class:`train.mdp.tasks.TaskMeter`; a cell reports the mean and standard deviation over the seeds of the success
 rate (Push: of the mean contact rate). The same harness scores the student policy and the QP teacher tracking the
 fixed 1.0x reference (the paper's reference-based rows). Every result names its scale: episodes, seeds and what
 was scored (checkpoint and its training figures), so a CPU smoke number is never mistaken for a full one.
@@ -25,9 +26,9 @@ from pipeline.robot import JOINTS_QPOS
 from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
 from pipeline.stage.figure import save_figure
 from train.dagger import read_log
-from train.env import EnvConfig, InteractionEnv
+from train.envs.cpu.env import EnvConfig, InteractionEnv
 from train.episodes import TASKS, Episode
-from train.tasks import Rules
+from train.mdp.tasks import Rules
 
 TABLE2: dict[str, tuple[float, ...]] = {
     "PickUp": (0.4, 0.6, 1.0, 1.4, 1.6),

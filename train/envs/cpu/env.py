@@ -13,7 +13,7 @@ datasets' ``action``), held for :data:`SUBSTEPS` physics steps. **Observations**
   states (:func:`pipeline.terms.link_motion.link_state`) and the objects' exact fields at the scaled geometry.
 
 The policy keeps its own ``l``-step history. Episodes end at the reference's last frame or on a fall
-(:func:`physicalize.rollout.fallen` against the episode's simulated motion); :class:`train.tasks.TaskMeter`
+(:func:`pipeline.terms.fall.fallen` against the episode's simulated motion); :class:`train.mdp.tasks.TaskMeter`
 scores them. Environments step in ``threads`` worker threads (MuJoCo releases the GIL while it steps).
 """
 
@@ -25,31 +25,31 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from features.compute import FeatureConfig
-from physicalize.contacts import robot_contacts
-from physicalize.hand_reach import hand_geoms
-from physicalize.rollout import SUBSTEPS, fallen
+from pipeline.contacts import robot_contacts
 from pipeline.distance.field import ObjectField, ObjectFields, boxes_query_links
 from pipeline.geometry import Chair, MeshGeometry, Primitive
 from pipeline.robot import FOOT_BODIES, NQ_ROBOT, NUM_JOINTS, NV_ROBOT
-from pipeline.scene import Scene, SceneObject, build_scene, link_collision_geoms
+from pipeline.scene import Scene, SceneObject, build_scene, hand_geoms, link_collision_geoms
+from pipeline.terms.fall import fallen
 from pipeline.terms.interaction import interaction_features
+from pipeline.terms.layout import DF_LINKS, ROOT_HORIZON_S, SUBSTEPS
 from pipeline.terms.link_motion import body_ids, link_motion, link_state
 from pipeline.terms.observations import command_frames, proprioception, root_command_to
-from train import randomize as R
 from train.episodes import Episode, check_scale, scaled_objects
-from train.randomize import Variation
-from train.tasks import Rules, StepFacts, TaskMeter
+from train.mdp import randomize as R
+from train.mdp.randomize import Variation
+from train.mdp.tasks import Rules, StepFacts, TaskMeter
 
 
 @dataclass(frozen=True)
 class EnvConfig:
-    """``links``: the DF links (the features stage's); ``root_horizon_s``: how far ahead the root command looks;
+    """``links``: the DF links (the observation contract's, :mod:`pipeline.terms.layout`); ``root_horizon_s``: how far
+    ahead the root command looks;
     ``threads``: worker threads stepping the environments. The actuator profile is each episode's
     (:attr:`train.episodes.Episode.profile`)."""
 
-    links: tuple[str, ...] = FeatureConfig().links
-    root_horizon_s: float = FeatureConfig().root_horizon_s
+    links: tuple[str, ...] = DF_LINKS
+    root_horizon_s: float = ROOT_HORIZON_S
     threads: int = 1
     rules: Rules = field(default_factory=Rules)
 
@@ -70,7 +70,7 @@ class _Slot:
         self.objects = scaled_objects(sim.robot.objects, self.scale)
         if variation is None:
             placed = [SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in self.objects]
-        else:  # the randomisations drawn once per episode (train.randomize)
+        else:  # the randomisations drawn once per episode (train.mdp.randomize)
             self.objects = tuple(R.vary_shape(o, variation) for o in self.objects)
             placed = [
                 SceneObject(o.name, o.geometry, R.object_physics(o, variation), pose=R.placed(o, variation))
@@ -225,7 +225,7 @@ class InteractionEnv:
 
     def reset(self, assignments: list[tuple]) -> Obs:
         """Start every environment: ``assignments[i] = (episode, scale)`` or ``(episode, scale, variation)`` (a
-        :class:`train.randomize.Variation`); the observation of the first frame."""
+        :class:`train.mdp.randomize.Variation`); the observation of the first frame."""
         self.slots = [_Slot(e, s, self.cfg, self._fields, *v) for e, s, *v in assignments]
         return self.observe()
 

@@ -1,6 +1,7 @@
-"""The object of each mjlab world (:mod:`train.mjlab_env`): a free body made of box parts -- one box, or a chair's
+"""The object of each mjlab world (:mod:`train.envs.mjlab.env`): a free body made of box parts -- one box, or a chair's
 six (:func:`pipeline.geometry.chair_boxes`) -- and, where boxes may be drawn as cylinders
-(:func:`train.randomize.vary_shape`), one cylinder slot; each world holds its own copy of the sizes, positions, mass,
+(:func:`train.mdp.randomize.vary_shape`), one cylinder slot; each world holds its own copy of the sizes, positions,
+mass,
 inertia, friction (with the robot; with the floor: explicit contact pairs, :func:`add_object_floor_pairs`) and
 restitution, written at every restart from the episode and its draw.
 
@@ -12,7 +13,7 @@ used part, the pads being inside it.
 
 The mass of a part is the object's mass times its share of the parts' volume (as :func:`pipeline.scene.build_spec`
 builds it); what MuJoCo derives at compile time from the parts is written directly (:func:`rigid_body`), not by
-MuJoCo Warp's ``set_const`` (~1400 kernel launches per call; measured in :mod:`train.mjlab_env`)."""
+MuJoCo Warp's ``set_const`` (~1400 kernel launches per call; measured in :mod:`train.envs.mjlab.env`)."""
 
 from __future__ import annotations
 
@@ -81,7 +82,8 @@ class Shapes:
 
     def at(self, episode: torch.Tensor, scale: torch.Tensor, cylinder: torch.Tensor) -> Parts:
         """The slots of episodes ``episode`` at the per-axis ``scale`` (n, 3), a box drawn as a cylinder where
-        ``cylinder`` (:func:`train.randomize.vary_shape`): the box scaled, or :meth:`pipeline.geometry.Chair.scaled`'s
+        ``cylinder`` (:func:`train.mdp.randomize.vary_shape`): the box scaled, or
+        :meth:`pipeline.geometry.Chair.scaled`'s
         parts."""
         box = self.half[episode] * scale
         n, dev = len(episode), box.device
@@ -196,8 +198,9 @@ def add_object_floor_pairs(spec: mujoco.MjSpec, obj: SceneObject) -> None:
 
 
 def write_object(env, ids: torch.Tensor, shapes: Shapes, parts: Parts, draws: dict, episode: torch.Tensor) -> None:
-    """Worlds ``ids`` take the object ``parts`` of their episodes under ``draws`` (:func:`train.randomize.draw_batch`'s,
-    as tensors): slot sizes and positions, mass (:func:`train.randomize.object_physics`), inertia, friction,
+    """Worlds ``ids`` take the object ``parts`` of their episodes under ``draws``
+    (:func:`train.mdp.randomize.draw_batch`'s,
+    as tensors): slot sizes and positions, mass (:func:`train.mdp.randomize.object_physics`), inertia, friction,
     restitution (:func:`pipeline.scene.restitution_solref`: a contact spring where it is drawn above 0) and the
     derived constants (:func:`rigid_body`)."""
     m, obj = env.sim.model, env.scene["object"]

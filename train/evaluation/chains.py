@@ -5,7 +5,7 @@ episodes. The robot starts the first at its recorded first state; when a task's 
 frame), the next one is moved rigidly in the plane (:func:`relocated`) so that its first root pose is where the
 robot stands and the way it faces, its object is placed there, and the robot goes on from its own state (joint
 angles, velocities, previous action; the policy's observation history runs on, its newest step re-observed in the
-new scene). The chain succeeds when every task succeeds by its own rule (:class:`train.tasks.TaskMeter`), the robot
+new scene). The chain succeeds when every task succeeds by its own rule (:class:`train.mdp.tasks.TaskMeter`), the robot
 never falls and its root never strays more than :attr:`ChainConfig.tolerance_m` (0.6 m, the paper's) from the
 commanded root trajectory at any step. A result per chain length: the success rate over the chains of an
 evaluation seed, mean and std over the seeds, and the mean number of tasks completed.
@@ -23,7 +23,7 @@ from tqdm import tqdm
 from pipeline.rotations import rotation_from_wxyz, xyzw_to_wxyz
 from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
 from pipeline.terms.observations import heading_yaw
-from train.env import InteractionEnv
+from train.envs.cpu.env import InteractionEnv
 from train.episodes import Episode
 
 CHAIN_LENGTHS = (5, 10, 15, 25, 40)

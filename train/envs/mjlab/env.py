@@ -1,43 +1,32 @@
-"""Post-training on mjlab (MuJoCo Warp, ``--backend mjlab``): the environment of :mod:`train.post_env` as an mjlab
+"""Post-training on mjlab (MuJoCo Warp, ``--backend mjlab``): the environment of :mod:`train.envs.cpu.vec_env` as an
+mjlab
 ``ManagerBasedRlEnv`` over ``N`` worlds, so a GPU steps thousands of episodes at once. Nothing is written twice:
 
 * **scene**: the robot of :func:`pipeline.scene.build_spec` (the episodes' actuator profile, the floor, the solver
-  options) and the object of :func:`train.mjlab_object.entity_spec`, as two mjlab entities; the joint targets go
+  options) and the object of :func:`train.envs.mjlab.object.entity_spec`, as two mjlab entities; the joint targets go
   through mjlab's joint-position action (absolute targets, scale 1) with the actuation noise added;
 * **observations, rewards, terminations**: plain term functions calling the CPU environment's own functions on
   torch tensors read from the warp data (:mod:`pipeline.terms.observations`, :mod:`pipeline.terms.interaction`,
   :func:`pipeline.terms.link_motion.link_velocity`, the box field of :mod:`pipeline.distance.primitive`,
-  :mod:`train.rewards`, the fall test of :mod:`physicalize.rollout`); ``policy`` is the ``l``-step windows in
-  :func:`train.rl_model.flatten_windows`'s layout (mjlab's per-term history), ``critic`` the current step;
+  :mod:`train.mdp.rewards`, the fall test of :mod:`pipeline.terms.fall`), by kind in :mod:`train.envs.mjlab`'s
+  ``observations``, ``rewards``, ``terminations``, ``events`` and ``actions``; ``policy`` is the ``l``-step windows
+  in :class:`pipeline.terms.layout.ObservationLayout`'s flat order (mjlab's per-term history, the terms in the
+  layout's order), ``critic`` the current step;
 * **episodes**: a restart draws the episode and its randomisations on the device with the CPU environment's own
-  functions (:func:`train.randomize.draw_batch`, :func:`train.randomize.perturbed_initial_state`, written once for
+  functions (:func:`train.mdp.randomize.draw_batch`, :func:`train.mdp.randomize.perturbed_initial_state`, written once
+  for
   numpy and torch), for all restarting worlds at once, and writes the first state and the object's size, mass,
-  inertia and friction into them (per-world model fields); the command offset (:func:`train.randomize.turn`) and
+  inertia and friction into them (per-world model fields); the command offset (:func:`train.mdp.randomize.turn`) and
   the perception noise apply every step.
 
-Measured on one H200 (``make bench-train-mjlab``, 4096 worlds, the default corpus's box episodes, the laptop run's
-policy), three versions: restarts as a Python loop of the numpy code, then drawn and started on the device for all
-worlds at once, then without MuJoCo Warp's ``set_const`` (the object's derived constants written directly,
-:func:`train.mjlab_object.rigid_body`):
+Its speed on a GPU (``make bench-train-mjlab``) is in ``BENCHMARKS.md``: the restarts are drawn and started on the
+device for all worlds at once, and the object's derived constants written directly rather than through MuJoCo Warp's
+``set_const`` (:func:`train.envs.mjlab.object.rigid_body`), because each was measured faster there.
 
-==========================================  ==========  ==========  =============
-env steps/s                                  loop        batched     no set_const
-==========================================  ==========  ==========  =============
-MuJoCo Warp alone (4 substeps)               173k        173k        152k
-this environment                             29k         48k         56k
-PPO, plain (no randomisation, no prior)      22k         28k         39k
-PPO + randomisations                         20k (+10%)  27k (+7%)   36k (+8%)
-PPO + randomisations + AIP + AMP             21k (+7%)   25k (+14%)  36k (+10%)
-==========================================  ==========  ==========  =============
-
-(5 PPO iterations per case in the first two columns, 3 in the last; the physics row moved by 12% between machines.)
-These were measured on the box episodes alone, one box geom per world, and before :class:`train.mjlab_terms.Worlds`
-was shared by mjlab's managers (their terms read a stale copy, doing the same work per step on the wrong episode);
-the chairs' six parts and the cylinder slot have not been measured on a GPU.
-
-:class:`MjlabPostTrainEnv` is rsl_rl's ``VecEnv`` over it with :class:`train.post_env.PostTrainEnv`'s observations
+:class:`MjlabPostTrainEnv` is rsl_rl's ``VecEnv`` over it with :class:`train.envs.cpu.vec_env.PostTrainEnv`'s
+observations
 and extras, so :mod:`train.aip` trains either. It runs the episodes of one box or one chair, the four tasks of the
-default corpus, with the six randomisations (:mod:`train.mjlab_object`: every world's object has the most box parts
+default corpus, with the six randomisations (:mod:`train.envs.mjlab.object`: every world's object has the most box parts
 any episode needs and a cylinder slot for the boxes drawn as cylinders). Not on this backend yet (a one-line error,
 or left out and said so): mesh objects (mjlab fixes a world's meshes at start-up: they need its pre-built variants).
 Two known differences from native MuJoCo: MuJoCo Warp makes at most one contact between a capsule (the G1's limbs)
@@ -66,41 +55,20 @@ from mjlab.sim import MujocoCfg, SimulationCfg
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
-from features.compute import FeatureConfig
-from physicalize.rollout import SUBSTEPS
 from pipeline.errors import InputError
 from pipeline.robot import NUM_JOINTS
-from pipeline.scene import (
-    IMPRATIO,
-    PHYSICS_TIMESTEP,
-    SceneObject,
-    build_spec,
-)
-from train import rewards as R
+from pipeline.scene import IMPRATIO, SceneObject, build_spec
+from pipeline.terms.layout import AMP_STATE, DF_LINKS, PHYSICS_TIMESTEP, SUBSTEPS, ObservationLayout
+from train.envs.cpu.vec_env import PostEnvConfig
+from train.envs.mjlab.actions import NoisyJointTargetsCfg
+from train.envs.mjlab.events import start_episodes
+from train.envs.mjlab.object import add_object_floor_pairs, entity_spec
+from train.envs.mjlab.observations import interaction, interaction_seen, proprio, root_command
+from train.envs.mjlab.rewards import action_rate, joint_limits, object_tracking, root_tracking, termination
+from train.envs.mjlab.terminations import fell, reference_end
+from train.envs.mjlab.worlds import Worlds, check_episodes, runs_on_mjlab
 from train.episodes import Episode
-from train.mjlab_object import add_object_floor_pairs, entity_spec
-from train.mjlab_terms import (
-    NoisyJointTargetsCfg,
-    Worlds,
-    action_rate,
-    check_episodes,
-    fell,
-    interaction,
-    interaction_seen,
-    joint_limits,
-    object_tracking,
-    proprio,
-    reference_end,
-    root_command,
-    root_tracking,
-    runs_on_mjlab,
-    start_episodes,
-    termination,
-)
-from train.post_env import AMP_STATE, PostEnvConfig
-
-DF_START = 2 * NUM_JOINTS + 6 + NUM_JOINTS + 12
-"""Where the DF features start in the ``critic`` row ``[proprio (93), root_command (12), df]``."""
+from train.mdp import rewards as R
 
 CONTACTS, CONSTRAINT_ROWS = 64, 512
 """Per world: MuJoCo Warp allocates contacts and constraint rows up front (past the limit contacts are dropped). The
@@ -133,12 +101,12 @@ def check_device(device: str) -> None:
 
 
 def env_cfg(worlds: Worlds, envs: int, history: int, weights: R.RewardWeights,
-            links: tuple[str, ...] = FeatureConfig().links) -> ManagerBasedRlEnvCfg:  # fmt: skip
+            links: tuple[str, ...] = DF_LINKS) -> ManagerBasedRlEnvCfg:  # fmt: skip
     """The mjlab configuration of ``envs`` worlds over ``worlds``' episodes (module docstring)."""
     profile = worlds.episodes[0].profile
     if any(e.profile != profile for e in worlds.episodes):
         raise InputError(worlds.episodes[0].simulated.robot.source, "actuator_profile", "episodes of two profiles")
-    shapes = worlds.shapes  # the object entity has the most parts any episode needs (train.mjlab_object)
+    shapes = worlds.shapes  # the object entity has the most parts any episode needs (train.envs.mjlab.object)
     first = worlds.episodes[int(shapes.chair.int().argmax()) if shapes.parts > 1 else 0].simulated.robot.objects[0]
     robot = EntityCfg(
         spec_fn=lambda: _robot_spec(profile),
@@ -154,9 +122,12 @@ def env_cfg(worlds: Worlds, envs: int, history: int, weights: R.RewardWeights,
     def reward(func, weight: float, **params) -> RewardTermCfg:
         return RewardTermCfg(func=func, weight=weight, params=params)
 
-    policy = {"proprio": obs(proprio, None, history), "root_command": obs(root_command, w, history),
-              "df": obs(interaction_seen, lw, history)}  # fmt: skip
-    critic = {"proprio": obs(proprio), "root_command": obs(root_command, w), "df": obs(interaction, lw)}
+    # the terms in the layout's order: mjlab concatenates a group's terms (each its l-step history) in this order
+    seen = {"proprio": (proprio, None), "root_command": (root_command, w), "df": (interaction_seen, lw)}
+    true = {**seen, "df": (interaction, lw)}
+    terms = ObservationLayout(links, history).step_slices()
+    policy = {k: obs(*seen[k], history) for k in terms}
+    critic = {k: obs(*true[k]) for k in terms}
     frames = int(worlds.frames.max())
     return ManagerBasedRlEnvCfg(
         decimation=SUBSTEPS,
@@ -208,7 +179,7 @@ def _robot_spec(profile) -> mujoco.MjSpec:
 
 
 class MjlabPostTrainEnv(VecEnv):
-    """rsl_rl's ``VecEnv`` over the mjlab environment, with :class:`train.post_env.PostTrainEnv`'s observations
+    """rsl_rl's ``VecEnv`` over the mjlab environment, with :class:`train.envs.cpu.vec_env.PostTrainEnv`'s observations
     (``policy`` windows, ``critic`` current step) and extras (``style``, ``time_outs``, ``log``)."""
 
     def __init__(self, episodes: list[Episode], history: int, config: PostEnvConfig = PostEnvConfig(),
@@ -221,6 +192,8 @@ class MjlabPostTrainEnv(VecEnv):
         self.num_envs, self.num_actions = config.envs, NUM_JOINTS
         self.max_episode_length = int(self.worlds.frames.max())
         self.weights = {k: v for k, v in config.weights.terms().items() if k in self.env.reward_manager.active_terms}
+        where = ObservationLayout(history=history).step_slices()  # the critic row's terms
+        self.proprio, self.df = where["proprio"], where["df"]
 
     @property
     def episode_length_buf(self) -> torch.Tensor:
@@ -230,10 +203,10 @@ class MjlabPostTrainEnv(VecEnv):
         return TensorDict({k: self.obs[k] for k in ("policy", "critic")}, batch_size=[self.num_envs])
 
     def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
-        before = self.obs["critic"][:, AMP_STATE]
+        before = self.obs["critic"][:, self.proprio][:, AMP_STATE]
         obs, reward, terminated, time_outs, _ = self.env.step(actions)
         critic = obs["critic"]
-        style = {"df": critic[:, DF_START:], "transition": torch.cat([before, critic[:, AMP_STATE]], 1)}
+        style = {"df": critic[:, self.df], "transition": torch.cat([before, critic[:, self.proprio][:, AMP_STATE]], 1)}
         done = terminated | time_outs
         means = self._term_values().mean(0).tolist()  # one device sync for all terms
         log = {f"/reward/{k}": v / w for (k, w), v in zip(self.weights.items(), means)}

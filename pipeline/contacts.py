@@ -6,9 +6,9 @@ MuJoCo's contact ``i`` joins ``geom1`` and ``geom2``; its frame's first row is t
 world-frame force on the robot is therefore ``+frame^T f6[:3]`` when the robot is ``geom2`` and its negative
 when it is ``geom1``. Contacts are visited in MuJoCo's order, so sums over them are the same in every user.
 
-Here rather than in :mod:`pipeline`: only the physicalize stage simulates, and only it reads contact forces
-(the controller's measured external forces, its seat contacts, the stepping logic's foot loads, the
-rollout's records).
+Shared robot-and-scene knowledge: the physicalize stage reads contact forces (the controller's measured external
+forces, its seat contacts, the stepping logic's foot loads, the rollout's records), the training environments read
+which of the robot's geoms touch the object (the tasks' success rules).
 """
 
 from __future__ import annotations

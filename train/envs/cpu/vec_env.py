@@ -1,20 +1,22 @@
 """The interaction environment as rsl_rl's :class:`~rsl_rl.env.VecEnv` for post-training (paper Sec. III-C): ``N``
 environments that never stop (a finished episode restarts at once with a new draw), the policy's observation
-history, and the task rewards of the paper's table (:mod:`train.rewards`) measured after every step.
+history, and the task rewards of the paper's table (:mod:`train.mdp.rewards`) measured after every step.
 
-* **Episodes**: each start draws a training episode uniformly and its randomisations (:mod:`train.randomize`:
+* **Episodes**: each start draws a training episode uniformly and its randomisations (:mod:`train.mdp.randomize`:
   object scale per axis and shape, physical properties, initial offsets, command offset); every step adds the
   actuation noise to the joint targets and the perception noise to the DF features the policy reads. The paper
   post-trains on procedurally varied objects, while BC + DAgger only saw scale 1.0.
 * **Observations** (a TensorDict): ``policy``, the flat ``l``-step windows :class:`train.rl_model.InteractionActor`
-  reads (:func:`train.rl_model.flatten_windows`); ``critic``, the current step's ``[proprio, root_command, df]``.
+  reads (:meth:`pipeline.terms.layout.ObservationLayout.flatten`); ``critic``, the current step's ``[proprio,
+  root_command, df]``.
 * **Rewards** after the step, before any restart: root tracking against the episode's simulated root at its time,
   object tracking against the object's reference track, the action rate, the termination (a fall, not a
-  time-out) and the soft joint limits (:func:`task_rewards`); the action rate compares the policy's targets
+  time-out) and the soft joint limits (:func:`train.envs.cpu.rewards.task_rewards`); the action rate compares the
+  policy's targets
   (before the actuation noise) and is 0 on an episode's first step. The style rewards (AIP, AMP) are the algorithm's
   (:class:`train.aip.AdversarialPPO`): ``extras["style"]`` carries what they read, taken before any restart: the DF
   features ``df`` (N, 10K) of the state reached and the AMP transition ``(s_t, s_(t+1))`` (N, 2 x 64) with ``s`` the
-  proprioception without the previous action (:data:`AMP_STATE`).
+  proprioception without the previous action (:data:`pipeline.terms.layout.AMP_STATE`).
 """
 
 from __future__ import annotations
@@ -27,15 +29,13 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from pipeline.robot import NUM_JOINTS
-from train import rewards as R
+from pipeline.terms.layout import AMP_STATE, ObservationLayout
 from train.actors import History
-from train.env import EnvConfig, InteractionEnv, Obs
+from train.envs.cpu.env import EnvConfig, InteractionEnv, Obs
+from train.envs.cpu.rewards import task_rewards
 from train.episodes import Episode
-from train.randomize import RandomizationConfig, Variation, actuation_noise, draw, perception_noise
-from train.rl_model import flatten_windows
-
-AMP_STATE = slice(0, 2 * NUM_JOINTS + 6)
-"""The columns of ``proprio`` the AMP discriminator reads: ``[q, dq, gravity_root, omega_root]`` (64)."""
+from train.mdp import rewards as R
+from train.mdp.randomize import RandomizationConfig, Variation, actuation_noise, draw, perception_noise
 
 
 @dataclass(frozen=True)
@@ -50,28 +50,6 @@ class PostEnvConfig:
     seed: int = 0
 
 
-def task_rewards(env: InteractionEnv, actions: np.ndarray, last_actions: np.ndarray, weights: R.RewardWeights):
-    """(N,) the weighted task terms after a step (``last_actions`` the targets of the step before, or the same
-    ``actions`` on an episode's first step), and each term's mean (for the log)."""
-    slots = env.slots
-    root = np.stack([s.data.qpos[:3] for s in slots])
-    ref_root = np.stack([s.episode.simulated.robot.qpos[min(s.t, s.episode.simulated.frames - 1), :3] for s in slots])
-    obj = np.stack([s.last_facts.object_pos for s in slots])
-    obj_ref = np.stack([s.last_facts.object_ref for s in slots])
-    fell = np.array([s.fell for s in slots])
-    m = slots[0].scene.model
-    lower, upper = m.jnt_range[1 : 1 + NUM_JOINTS].T
-    q = np.stack([s.data.qpos[7 : 7 + NUM_JOINTS] for s in slots])
-    terms = {
-        "root_tracking": R.root_tracking(root, ref_root),
-        "object_tracking": R.object_tracking(obj, obj_ref, weights.object_sigma_m),
-        "action_rate": R.action_rate(actions, last_actions),
-        "termination": R.termination(fell, np.zeros_like(fell)),
-        "joint_limits": R.joint_limits(q, lower, upper, weights.soft_limit),
-    }
-    return R.total(terms, weights), {k: float(np.mean(v)) for k, v in terms.items()}
-
-
 class PostTrainEnv(VecEnv):
     """``config.envs`` restarting environments over ``episodes`` for a policy with an ``history``-step window."""
 
@@ -82,6 +60,7 @@ class PostTrainEnv(VecEnv):
         self.rng = np.random.default_rng([config.seed, 7])
         self.env = InteractionEnv(EnvConfig(threads=config.threads))
         self.history = History(history)
+        self.layout = ObservationLayout(self.env.cfg.links, history)
         self.history.reset(self._seen(self.env.reset([self._draw() for _ in range(config.envs)])))
         self.last_actions = np.stack([s.last_action for s in self.env.slots])
         self.num_envs, self.num_actions = config.envs, NUM_JOINTS
@@ -104,7 +83,7 @@ class PostTrainEnv(VecEnv):
         current = np.concatenate([h["proprio"][:, -1], h["root_command"][:, -1], h["df"][:, -1]], axis=1)
         return TensorDict(
             {
-                "policy": self._tensor(flatten_windows(h["proprio"], h["root_command"], h["df"])),
+                "policy": self._tensor(self.layout.flatten(h["proprio"], h["root_command"], h["df"])),
                 "critic": self._tensor(current),
             },
             batch_size=[self.num_envs],
