@@ -22,13 +22,27 @@ export TOKENIZERS_PARALLELISM := false
 
 install: $(VENV)/.installed
 
+# uv creates .venv and installs into it: the uv on PATH, else the pinned one pip-installed into build/uv/ by whatever
+# python3 the machine has (any version). Where that fails too (Ubuntu without python3-venv) it says how to get uv.
+UV_VERSION := 0.13.9
+UV_TOOL    := build/uv
+UV         ?= $(or $(shell command -v uv 2>/dev/null),$(UV_TOOL)/bin/uv)
+# The venv's interpreter: $(PYTHON) where it is on PATH, else "3.11": uv takes any Python 3.11 it finds on the machine,
+# else downloads its own managed 3.11 (so a machine whose system Python is 3.10 or 3.12 needs no 3.11 installed).
+VENV_PYTHON = $(or $(shell command -v $(PYTHON) 2>/dev/null),3.11)
+
+$(UV_TOOL)/bin/uv:
+	@echo "uv not on PATH: installing uv==$(UV_VERSION) into $(UV_TOOL)/ with python3 -m venv + pip"
+	@rm -rf $(UV_TOOL); python3 -m venv $(UV_TOOL) && $(UV_TOOL)/bin/pip install --quiet --disable-pip-version-check "uv==$(UV_VERSION)" \
+		|| { rm -rf $(UV_TOOL); echo "error: no uv, and python3 could not install it; get uv with: curl -LsSf https://astral.sh/uv/install.sh | sh  (then rerun make in a new shell)"; exit 1; }
+
 # constraints.txt pins every transitive package (regenerate: uv pip compile pyproject.toml --extra dev -o constraints.txt).
 # uv resolves and installs the pinned set in about a minute with a warm cache (pip: ~12 min).
 $(VENV)/.installed: pyproject.toml constraints.txt
-	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found (the toolkit needs Python 3.11)"; exit 1; }
-	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --disable-pip-version-check "uv==0.13.9"
-	$(VENV)/bin/uv pip install --python $(PY) -c constraints.txt -e ".[dev]"
+	@command -v $(UV) >/dev/null || $(MAKE) --no-print-directory $(UV)
+	@test -x $(PY) || command -v $(PYTHON) >/dev/null || echo "$(PYTHON) not on PATH: uv takes another Python 3.11 on this machine, else downloads its own"
+	test -x $(PY) || { rm -rf $(VENV) && $(UV) venv --python $(VENV_PYTHON) $(VENV); }
+	$(UV) pip install --python $(PY) -c constraints.txt -e ".[dev]"
 	touch $@
 
 retarget: install
