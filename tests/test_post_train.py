@@ -2,6 +2,7 @@
 physicalize -> features datasets, a BC policy trained for a few steps, real MuJoCo."""
 
 import json
+import zipfile
 from dataclasses import replace
 
 import numpy as np
@@ -84,6 +85,10 @@ def test_one_ppo_iteration_from_a_bc_checkpoint_trains_the_policy_and_both_prior
     assert any(moved)
     for a, b in zip(before.vae.parameters(), after.vae.parameters()):
         assert torch.equal(a, b)  # the VAE stays frozen
+    for ckpt in ("policy.pt", "post_state.pt"):  # no class path of ours inside: moving a module never breaks a resume
+        with zipfile.ZipFile(tmp_path / ckpt) as z:
+            pickled = b"".join(z.read(n) for n in z.namelist() if n.endswith(".pkl"))
+        assert b"train." not in pickled and b"pipeline." not in pickled, ckpt
     post_train("train", bc_policy, tmp_path, SMOKE)  # resumed: nothing left to do
     post_train("train", bc_policy, tmp_path, replace(SMOKE, iterations=2))
     rows = [json.loads(line) for line in (tmp_path / "post_log.jsonl").open()]

@@ -81,3 +81,26 @@ def test_short_clip_is_reported_and_others_go_on(tmp_path):
     assert len(list(run.clips.glob("*.pkl"))) == 2
     again = run.map(retarget_one, [(0, short), (1, good)], key=_clip_key)
     np.testing.assert_array_equal(again[1].robot.qpos, results[1].robot.qpos)
+
+
+@pytest.mark.parametrize(
+    "name, content",
+    [("truncated.bvh", "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0"), ("notes.txt", "not mocap"), ("empty", None)],
+)
+def test_a_refused_input_leaves_no_dataset_folder_behind(name, content, tmp_path, monkeypatch):
+    """The chain reads and validates the input before the retarget stage records its run: a refused input is one
+    line and writes nothing (no ``datasets/<NAME>/.work/retargeted/run.json`` of a run that never started)."""
+    from lessmimic.chain import retarget
+
+    root = tmp_path / "datasets"
+    root.mkdir()
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(root))
+    src = tmp_path / name
+    if content is None:
+        src.mkdir()
+    else:
+        src.write_text(content)
+    with pytest.raises(InputError) as err:
+        retarget(str(src), "bad")
+    assert "\n" not in str(err.value) and str(src) in str(err.value)
+    assert not any(root.iterdir()), sorted(p.relative_to(root) for p in root.rglob("*"))

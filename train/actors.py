@@ -8,28 +8,8 @@ import numpy as np
 import torch
 
 from pipeline.errors import InputError
-from train.envs.cpu.env import InteractionEnv, Obs
+from train.envs.cpu.env import History, InteractionEnv, Obs
 from train.teacher import Teacher, episode_reference
-
-
-class History:
-    """The last ``l`` observations per environment, ``(N, l, dim)`` per term; an environment's first observation
-    fills its whole window (as :class:`pipeline.dataset.windows.WindowDataset` pads an episode's start)."""
-
-    def __init__(self, length: int):
-        self.length = length
-        self.terms: dict[str, np.ndarray] = {}
-
-    def reset(self, obs: Obs, which: np.ndarray | None = None) -> None:
-        for key, value in vars(obs).items():
-            if key not in self.terms or which is None:
-                self.terms[key] = np.repeat(value[:, None], self.length, axis=1)
-            else:
-                self.terms[key][which] = np.repeat(value[which, None], self.length, axis=1)
-
-    def push(self, obs: Obs) -> None:
-        for key, value in vars(obs).items():
-            self.terms[key] = np.concatenate([self.terms[key][:, 1:], value[:, None]], axis=1)
 
 
 class PolicyActor:

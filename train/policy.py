@@ -13,7 +13,7 @@ and maps the ``l`` tokens to the normalised joint targets of step ``t``:
 and :meth:`InteractionPolicy.act` returns ``denormalize(a)``: absolute joint position targets (29, mjlab order).
 The policy owns the frozen VAE encoder and the normalisers, so it takes raw tensors. History steps before an
 episode's start hold that episode's first step (the convention of :class:`pipeline.dataset.WindowDataset`; on
-the rollout side :class:`train.actors.History` does the same), so no mask is needed.
+the rollout side :class:`train.envs.cpu.env.History` does the same), so no mask is needed.
 
 A checkpoint is one ``torch.save`` dict (:func:`save_policy`, :func:`load_policy`) with a ``layout`` that names what
 the policy reads and drives (links, dims, actuator profile, history); loading checks it against the caller's.

@@ -30,8 +30,7 @@ from tensordict import TensorDict
 
 from pipeline.robot import NUM_JOINTS
 from pipeline.terms.layout import AMP_STATE, ObservationLayout
-from train.actors import History
-from train.envs.cpu.env import EnvConfig, InteractionEnv, Obs
+from train.envs.cpu.env import EnvConfig, History, InteractionEnv, Obs
 from train.envs.cpu.rewards import task_rewards
 from train.episodes import Episode
 from train.mdp import rewards as R
