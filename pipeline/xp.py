@@ -1,6 +1,7 @@
-"""numpy and torch written alike: the array namespace ``xp`` that field code is written against.
+"""numpy and torch written alike: the array namespace ``xp`` that the distance fields, the observation terms, the
+rewards and the randomisations are written against, so the CPU and GPU backends share one implementation.
 
-Field math is written once, with ``xp`` the ``numpy`` module or the ``torch`` module, using
+That math is written once, with ``xp`` the ``numpy`` module or the ``torch`` module, using
 only what both spell the same (``sqrt abs sign where clip minimum maximum stack floor``,
 operators, indexing). The few operations they spell differently live here.
 """

@@ -6,6 +6,7 @@
 * :mod:`~pipeline.distance.mesh` -- meshes: warp closest point, or :mod:`~pipeline.distance.octree`;
 * :mod:`~pipeline.distance.box_warp`, :mod:`~pipeline.distance.scaled_warp`,
   :mod:`~pipeline.distance.ellipsoid_warp` -- the same fields as warp kernels (CPU or GPU);
-* :mod:`~pipeline.distance.warp_runtime`, :mod:`~pipeline.xp` -- warp start-up and the
-  numpy/torch array namespace the fields are written over.
+* :mod:`~pipeline.distance.warp_runtime` -- warp start-up.
+
+The fields are written over numpy or torch arrays alike (:mod:`pipeline.xp`).
 """
