@@ -108,7 +108,7 @@ train-bc: install
 # -Syn and -Trans are their own pre-training runs (`make corpus ABLATION=-Syn`, then `make train-bc ABLATION=-Syn`:
 # runs/$(RUN)-Syn/; -Trans: runs/$(RUN)-Trans/, an MLP), post-trained by `make train-aip ABLATION=-Syn` into
 # runs/$(RUN)-Syn/aip/; -RL is runs/$(RUN)/policy.pt as it is. Every row is scored on the full corpus by `make eval`.
-# BACKEND=mjlab steps the environments on a GPU through mjlab (MuJoCo Warp), 4096 by default (train/mjlab_env.py;
+# BACKEND=mjlab steps the environments on a GPU through mjlab (MuJoCo Warp), 4096 by default (train/envs/mjlab/;
 # box and chair objects: the four tasks; meshes stay on the CPU), into runs/$(RUN)/aip-mjlab/; the default, cpu, is native MuJoCo.
 AIP_ARGS ?=
 BACKEND ?= cpu
