@@ -1,8 +1,9 @@
 """Retarget one human clip to the G1: resample it to the control rate (:data:`FPS`), pick its mapping
-(:mod:`retarget.mapping`), compute the scale and the IK targets (:mod:`retarget.scaling`), map the objects
-into the robot's world (:mod:`retarget.objects`), solve the IK in a scene built with the same collision
-model as the physics (:mod:`retarget.ik`), label per-link contacts from the human's (:mod:`retarget.contact`)
-and measure it (:func:`retarget.metrics.retarget_metrics`)."""
+and map its joints once (:func:`retarget.mapping.map_human`), compute the scale and the IK targets
+(:mod:`retarget.scaling`), map the objects into the robot's world (:mod:`retarget.objects`), solve
+the IK in a scene built with the same collision model as the physics (:mod:`retarget.ik`), label
+per-link contacts from the human's (:mod:`retarget.contact`) and measure it
+(:func:`retarget.metrics.retarget_metrics`)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from pipeline.take import human_hold, object_field
 from retarget.contact import link_contact_flags
 from retarget.grip import SQUEEZE, anchored_targets, g1_opposition
 from retarget.ik import G1Retargeter
-from retarget.mapping import load_mapping
+from retarget.mapping import load_mapping, map_human
 from retarget.metrics import DEFAULT_LINK_MAP, retarget_metrics
 from retarget.objects import map_objects
 from retarget.scaling import compute_scale, human_to_targets
@@ -42,9 +43,10 @@ def retarget_clip(
     t0 = time.perf_counter()
     human = clip.resampled(FPS)
     mapping = load_mapping(human.skeleton, mapping_name, source=human.source)
-    info = compute_scale(human, mapping, height_override=height_override)
-    targets = human_to_targets(human, mapping, height_override=height_override, scale=info)
-    objects = map_objects(human, info, targets)
+    mapped = map_human(human, mapping)  # the clip's human points, once
+    info = compute_scale(mapped, height_override=height_override)
+    targets = human_to_targets(mapped, height_override=height_override, scale=info)
+    objects = map_objects(mapped, info, targets)
     link_map = _link_map(human, mapping)
     links, contacts = link_contact_flags(human, link_map)
     targets = replace(targets, contact_links=links, object_contact=contacts if objects else None)

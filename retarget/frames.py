@@ -9,16 +9,20 @@ same recipe for human and G1 (:func:`segment_frames`). For body ``k`` driven by 
 segment frame in the reference pose, ``G_r``/``R_r`` the G1's segment frame/body rotation at
 ``q = 0``. Segment directions carry over exactly; in the reference pose every target is the G1's
 ``q = 0`` rotation (up to the heading) where the human segment is posed like the G1's.
+
+Everything here reads the clip's points ``P`` as mapped once (:func:`~retarget.mapping.map_human`);
+the reference pose carries its own points and drivers (:class:`Reference`), taken from the clip's
+at the standing frame or mapped once from the rest pose.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from pipeline.clip import Skeleton
-from retarget.mapping import G1_ROLES, SIDES, Mapping, Z, g1_points, g1_rest, human_points
+from retarget.mapping import G1_ROLES, SIDES, MappedHuman, Mapping, Z, g1_points, g1_rest, human_points
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -92,12 +96,16 @@ def segment_frames(
 class Reference:
     """The standing pose offsets are calibrated in: joint positions ``(J, 3)``, global rotations
     ``(J, 3, 3)`` (None without orientations), ``up`` (None: the body's own pelvis -> chest, for a
-    rest pose not placed in the world) and a label."""
+    rest pose not placed in the world), a label, and the pose as one frame: its points ``P``
+    (:func:`~retarget.mapping.human_points`, ``(1, 3)`` each) and drivers ``D_k(ref)``
+    (:func:`driver_rotations`, ``(1, 3, 3)`` each)."""
 
     pos: np.ndarray
     rot: np.ndarray | None
     up: np.ndarray | None
     label: str
+    points: dict[str, np.ndarray] = field(repr=False)
+    driver: dict[str, np.ndarray] = field(repr=False)
 
 
 def rest_positions(joint_pos: np.ndarray, joint_rot: np.ndarray, skeleton: Skeleton) -> np.ndarray:
@@ -118,10 +126,9 @@ def _cosines(P: dict, mapping: Mapping, kinds: tuple[str, ...], U: np.ndarray) -
     return np.stack([np.stack([np.sum(_unit(P[b + ">"] - P[b]) * U, -1) for b in row], -1) for row in bodies], 1)
 
 
-def standing_frame(joint_pos: np.ndarray, skeleton: Skeleton, mapping: Mapping) -> int:
-    """The frame most like standing: score ``-sum cos(thighs and shanks, z) + 2 cos(pelvis ->
-    chest, z) - 5 |z_ankle,left - z_ankle,right| / leg length``, maximised."""
-    P = human_points(joint_pos, skeleton, mapping)
+def standing_frame(P: dict[str, np.ndarray], mapping: Mapping) -> int:
+    """The frame of the clip's points ``P`` most like standing: score ``-sum cos(thighs and shanks, z)
+    + 2 cos(pelvis -> chest, z) - 5 |z_ankle,left - z_ankle,right| / leg length``, maximised."""
     ankles = [P[mapping.body_of_kind("foot", s)] for s in SIDES]
     leg = max(float(np.median(np.linalg.norm(P["pelvis"] - ankles[0], axis=-1))), 1e-6)
     trunk = _unit(P["torso_link"] - P["pelvis"])[:, 2]
@@ -133,13 +140,13 @@ def standing_frame(joint_pos: np.ndarray, skeleton: Skeleton, mapping: Mapping) 
     return int(np.argmax(score))
 
 
-def reference_pose(
-    joint_pos: np.ndarray, joint_rot: np.ndarray | None, skeleton: Skeleton, mapping: Mapping
-) -> Reference:
+def reference_pose(mapped: MappedHuman) -> Reference:
     """The rest pose (:func:`rest_positions`) when it stands (thighs and shanks within 37 degrees
     of its own pelvis -> chest axis reversed, feet within 37 degrees of level: SMPL, OMOMO, PyMO
-    T-poses), else the clip's :func:`standing_frame` with world up (LAFAN1's zero-rotation pose is
-    no standing pose; clips without orientations have no rest pose)."""
+    T-poses), else the clip's :func:`standing_frame` ``t`` with world up and the clip's points
+    ``P(t)`` (LAFAN1's zero-rotation pose is no standing pose; clips without orientations have no
+    rest pose)."""
+    joint_pos, joint_rot, skeleton, mapping = mapped.clip.joint_pos, mapped.rot, mapped.clip.skeleton, mapped.mapping
     if joint_rot is not None:
         rest = rest_positions(joint_pos, joint_rot, skeleton)
         P = human_points(rest[None], skeleton, mapping)
@@ -147,31 +154,33 @@ def reference_pose(
         if (_cosines(P, mapping, ("thigh", "shank"), U) < -0.8).all() and (
             np.abs(_cosines(P, mapping, ("foot",), U)) < 0.6
         ).all():
-            return Reference(rest, np.broadcast_to(np.eye(3), (len(rest), 3, 3)), None, "rest pose")
-    t = standing_frame(joint_pos, skeleton, mapping)
-    return Reference(joint_pos[t], None if joint_rot is None else joint_rot[t], Z, f"frame {t}")
+            R = np.broadcast_to(np.eye(3), (len(rest), 3, 3))
+            return Reference(rest, R, None, "rest pose", P, driver_rotations(P, R[None], skeleton, mapping))
+    t = standing_frame(mapped.points, mapping)
+    P, R = {k: v[t : t + 1] for k, v in mapped.points.items()}, None if joint_rot is None else joint_rot[t]
+    D = driver_rotations(P, None if R is None else R[None], skeleton, mapping)
+    return Reference(joint_pos[t], R, Z, f"frame {t}", P, D)
 
 
 def driver_rotations(
-    joint_pos: np.ndarray, joint_rot: np.ndarray | None, skeleton: Skeleton, mapping: Mapping
+    P: dict[str, np.ndarray], joint_rot: np.ndarray | None, skeleton: Skeleton, mapping: Mapping
 ) -> dict[str, np.ndarray]:
-    """``D_k(t)`` ``(T, 3, 3)`` per body: the driving joint's global rotation, or without
-    orientations the frame from positions (:func:`segment_frames`, ``calibration=False``)."""
+    """``D_k(t)`` ``(T, 3, 3)`` per body: the driving joint's global rotation ``joint_rot[:, j]``, or
+    without orientations the frame from the points ``P`` (:func:`segment_frames`, ``calibration=False``)."""
     if joint_rot is not None:
         return {link.body: joint_rot[:, skeleton.index(link.joint)] for link in mapping.links}
-    return segment_frames(human_points(joint_pos, skeleton, mapping), mapping, None, calibration=False)
+    return segment_frames(P, mapping, None, calibration=False)
 
 
 def rotation_offsets(
-    ref: Reference, skeleton: Skeleton, mapping: Mapping, sole_up: dict[str, np.ndarray] | None = None
+    ref: Reference, mapping: Mapping, sole_up: dict[str, np.ndarray] | None = None
 ) -> dict[str, np.ndarray]:
     """``O_k = D_k(ref)^T G_h,k(ref) G_r,k^T R_r,k`` per body ``(3, 3)`` (module doc).
 
     ``sole_up[foot]``: the sole's normal in the foot driver's own frame, measured where the foot
     is planted; it replaces the reference's up in the foot recipe, so a planted human foot gives
     a level G1 foot whatever the reference's ankle angle."""
-    P = human_points(ref.pos[None], skeleton, mapping)
-    D = driver_rotations(ref.pos[None], None if ref.rot is None else ref.rot[None], skeleton, mapping)
+    P, D = ref.points, ref.driver
     Gh = segment_frames(P, mapping, ref.up)
     for b, u in (sole_up or {}).items():
         Gh[b] = D[b] @ frame_from(u, D[b][0].T @ (P[b + ">"][0] - P[b][0]))

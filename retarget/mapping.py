@@ -12,6 +12,9 @@ Mapping files (``retarget/mappings/*.json``, one per skeleton family)::
 tried most specific first (most required joints, then name). The part each G1 body plays is the
 G1's structure (:data:`G1_ROLES`); the G1 is measured at ``q = 0`` by FK (:func:`g1_rest`).
 
+A clip is mapped once (:func:`map_human`): its :func:`human_points` and joint rotations, which the
+scale, the reference pose, the drivers and the targets all read.
+
 Segment frames, the reference pose and the rotation offsets are in :mod:`retarget.frames`.
 """
 
@@ -25,9 +28,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from pipeline.clip import Skeleton
+from pipeline.clip import HumanClip, Skeleton
 from pipeline.errors import InputError
 from pipeline.robot import g1_model
+from pipeline.rotations import rotation_from_wxyz
 
 MAPPINGS_DIR = Path(__file__).with_name("mappings")
 SIDES = ("left", "right")
@@ -165,6 +169,26 @@ def human_points(joint_pos: np.ndarray, skeleton: Skeleton, mapping: Mapping) ->
         p = joint_pos[:, skeleton.index(link.joint)]
         P[link.body], P[link.body + ">"] = p, p + link.aim_sign * (joint_pos[:, skeleton.index(link.aim)] - p)
     return P
+
+
+@dataclass(frozen=True)
+class MappedHuman:
+    """One human clip seen through its mapping, each array computed once per clip: ``points`` =
+    :func:`human_points` of ``clip.joint_pos`` (``P[body]``, ``P[body + ">"]``, ``(T, 3)``); ``rot``
+    ``(T, J, 3, 3)`` the joints' global rotations ``R_j(t)`` from ``clip.joint_quat`` (None without)."""
+
+    clip: HumanClip
+    mapping: Mapping
+    points: dict[str, np.ndarray]
+    rot: np.ndarray | None
+
+
+def map_human(clip: HumanClip, mapping: Mapping) -> MappedHuman:
+    """``clip`` mapped by ``mapping`` (:class:`MappedHuman`): the one :func:`human_points` of its frames."""
+    rot = None
+    if clip.joint_quat is not None:
+        rot = rotation_from_wxyz(clip.joint_quat.reshape(-1, 4)).as_matrix().reshape(clip.frames, -1, 3, 3)
+    return MappedHuman(clip, mapping, human_points(clip.joint_pos, clip.skeleton, mapping), rot)
 
 
 def _names(value, path: Path, field: str) -> list[str]:

@@ -24,7 +24,7 @@ from pipeline.clip import HumanClip, ObjectTrack
 from pipeline.collision_mesh import load_mesh
 from pipeline.geometry import Chair, MeshGeometry, Primitive
 from pipeline.rotations import rotation_from_wxyz
-from retarget.mapping import G1_ROLES, Mapping
+from retarget.mapping import G1_ROLES, MappedHuman, Mapping
 from retarget.scaling import ScaleInfo, check_clip, human_to_targets
 from retarget.targets import IKTargets
 
@@ -124,16 +124,17 @@ def _map_track(o: ObjectTrack, clip: HumanClip, info: ScaleInfo, anchors) -> Obj
     return replace(o, pose=np.concatenate([out, o.pose[:, 3:]], axis=1))
 
 
-def map_objects(clip: HumanClip, scale_info: ScaleInfo, targets: IKTargets | None = None) -> tuple[ObjectTrack, ...]:
-    """The clip's objects in the robot's world: real size and orientation, placement following the
-    scaled interaction (module doc). ``targets``: the clip's :func:`human_to_targets` (computed
+def map_objects(
+    mapped: MappedHuman, scale_info: ScaleInfo, targets: IKTargets | None = None
+) -> tuple[ObjectTrack, ...]:
+    """The mapped clip's objects in the robot's world: real size and orientation, placement following
+    the scaled interaction (module doc). ``targets``: the clip's :func:`human_to_targets` (computed
     when not given)."""
+    clip = mapped.clip
     check_clip(clip)
     if not clip.objects:
         return ()
     if targets is None:
-        targets = human_to_targets(
-            clip, scale_info.mapping, height_override=scale_info.height_override, scale=scale_info
-        )
+        targets = human_to_targets(mapped, height_override=scale_info.height_override, scale=scale_info)
     anchors = _anchors(clip, targets, scale_info.mapping)
     return tuple(_map_track(o, clip, scale_info, anchors) for o in clip.objects)

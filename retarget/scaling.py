@@ -35,7 +35,8 @@ Orientations: ``R_k(t) = D_k(t) O_k`` (:func:`~retarget.frames.rotation_offsets`
 normal is measured on the frames the human foot is planted). Headings are the human's own, so
 any initial yaw works. Without joint orientations the arms get ``rot_weight`` 0.
 
-Objects are placed in the robot's world by :mod:`retarget.objects`.
+Every function here reads the clip as mapped once (:func:`~retarget.mapping.map_human`: the points
+``P`` and the joint rotations); objects are placed in the robot's world by :mod:`retarget.objects`.
 """
 
 from __future__ import annotations
@@ -45,13 +46,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pipeline.clip import HumanClip, Skeleton
+from pipeline.body_height import estimate_height
+from pipeline.clip import HumanClip
 from pipeline.errors import InputError
 from pipeline.foot_contact import detect_foot_contacts
-from pipeline.readers.keypoints import estimate_height
-from pipeline.rotations import rotation_from_wxyz, wxyz_from_rotation
+from pipeline.rotations import wxyz_from_rotation
 from retarget.frames import Reference, body_axes, driver_rotations, reference_pose, rotation_offsets
-from retarget.mapping import G1_ROLES, SIDES, Mapping, g1_points, g1_rest, human_points
+from retarget.mapping import G1_ROLES, SIDES, MappedHuman, Mapping, g1_points, g1_rest
 from retarget.targets import IKTargets
 
 HEIGHT_RANGE = (1.0, 2.3)
@@ -155,20 +156,12 @@ def segment_lengths(P: dict[str, np.ndarray], mapping: Mapping) -> dict[str, flo
     return out
 
 
-def _joint_rotations(clip: HumanClip) -> np.ndarray | None:
-    if clip.joint_quat is None:
-        return None
-    return rotation_from_wxyz(clip.joint_quat.reshape(-1, 4)).as_matrix().reshape(clip.frames, -1, 3, 3)
-
-
-def compute_scale(
-    clip: HumanClip, mapping: Mapping, *, height_override: float | None = None, _rot: np.ndarray | None = None
-) -> ScaleInfo:
-    """The clip's :class:`ScaleInfo` (checks the clip and the subject height first)."""
+def compute_scale(mapped: MappedHuman, *, height_override: float | None = None) -> ScaleInfo:
+    """The :class:`ScaleInfo` of the mapped clip (checks the clip and the subject height first):
+    factors from its points' :func:`segment_lengths`, ``c`` and ``c'`` (module doc), the reference pose."""
+    clip, mapping, P = mapped.clip, mapped.mapping, mapped.points
     check_clip(clip)
     height, src = subject_height(clip, height_override)
-    rot = _joint_rotations(clip) if _rot is None else _rot
-    P = human_points(clip.joint_pos, clip.skeleton, mapping)
     human, robot = segment_lengths(P, mapping), segment_lengths(g1_points(mapping), mapping)
     leg, trunk = robot["leg"] / human["leg"], robot["trunk"] / human["trunk"]
     arm = robot["arm"] / human["arm"] if "arm" in human else trunk
@@ -188,7 +181,7 @@ def compute_scale(
         np.array([x0, y0, np.mean(list(levels.values()))]),
         np.array([x0, y0, robot_ankle]),
         levels,
-        reference_pose(clip.joint_pos, rot, clip.skeleton, mapping),
+        reference_pose(mapped),
         height_override,
     )
 
@@ -241,15 +234,14 @@ def _heading(R: np.ndarray) -> np.ndarray:
     return out
 
 
-def position_offsets(info: ScaleInfo, skel: Skeleton, offsets: dict) -> dict[str, np.ndarray]:
-    """The per-body offsets ``delta`` (module doc), from the reference pose turned to face +x
-    (rows of ``Q`` = forward, left, up) with its pelvis above the origin."""
+def position_offsets(info: ScaleInfo, offsets: dict) -> dict[str, np.ndarray]:
+    """The per-body offsets ``delta`` (module doc), from the reference pose's points and drivers
+    turned to face +x (rows of ``Q`` = forward, left, up) with its pelvis above the origin."""
     ref, mapping = info.reference, info.mapping
-    P = human_points(ref.pos[None], skel, mapping)
+    P, D = ref.points, ref.driver
     L, U, F = body_axes(P, mapping, ref.up)
     Q, origin = np.stack([F[0], L[0], U[0]]), P["pelvis"][0]
     Pa = {k: (v - origin) @ Q.T for k, v in P.items()}
-    D = driver_rotations(ref.pos[None], None if ref.rot is None else ref.rot[None], skel, mapping)
     rot = {b: Q @ D[b] @ offsets[b] for b in mapping.body_names}
     hips = np.mean([Pa[mapping.body_of_kind("thigh", s)][0, 2] for s in SIDES])
     levels = dict.fromkeys(SIDES, float(hips - info.human["leg"]))  # as if the legs were straight
@@ -291,19 +283,19 @@ def sole_normals(D: dict, contact: np.ndarray | None, mapping: Mapping) -> dict[
 
 
 def human_to_targets(
-    clip: HumanClip, mapping: Mapping, *, height_override: float | None = None, scale: ScaleInfo | None = None
+    mapped: MappedHuman, *, height_override: float | None = None, scale: ScaleInfo | None = None
 ) -> IKTargets:
-    """G1 :class:`IKTargets` for ``clip`` (positions, orientations and weights as in the module
-    doc; ``foot_contact`` from the human's feet). ``scale``: a precomputed :class:`ScaleInfo`."""
-    rot = _joint_rotations(clip)
-    info = scale or compute_scale(clip, mapping, height_override=height_override, _rot=rot)
-    D = driver_rotations(clip.joint_pos, rot, clip.skeleton, mapping)
+    """G1 :class:`IKTargets` for the mapped clip: ``p'`` = :func:`_place` of its points plus ``R_f delta``,
+    ``R_k(t) = D_k(t) O_k`` (module doc); ``foot_contact`` from the human's feet. ``scale``: its
+    precomputed :class:`ScaleInfo` (else :func:`compute_scale` with ``height_override``)."""
+    clip, mapping = mapped.clip, mapped.mapping
+    info = scale or compute_scale(mapped, height_override=height_override)
+    D = driver_rotations(mapped.points, mapped.rot, clip.skeleton, mapping)
     contact = foot_contacts(clip)
-    offsets = rotation_offsets(info.reference, clip.skeleton, mapping, sole_normals(D, contact, mapping))
+    offsets = rotation_offsets(info.reference, mapping, sole_normals(D, contact, mapping))
     R = {b: D[b] @ offsets[b] for b in mapping.body_names}
-    P = human_points(clip.joint_pos, clip.skeleton, mapping)
-    deltas = position_offsets(info, clip.skeleton, offsets)
-    pos, _ = _place(P, R, info, info.center, info.foot_levels, info.robot_center, deltas)
+    deltas = position_offsets(info, offsets)
+    pos, _ = _place(mapped.points, R, info, info.center, info.foot_levels, info.robot_center, deltas)
     bodies = mapping.body_names
     rot_w = np.array([link.rot_weight for link in mapping.links])
     if clip.joint_quat is None:

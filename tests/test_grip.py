@@ -13,7 +13,7 @@ from pipeline.rotations import quat_mat
 from pipeline.take import held_frames, human_hold, object_field
 from retarget.clip import FPS, retarget_clip
 from retarget.grip import RAMP, SQUEEZE, anchored_targets, g1_opposition
-from retarget.mapping import load_mapping
+from retarget.mapping import load_mapping, map_human
 from retarget.objects import map_objects
 from retarget.scaling import compute_scale, human_to_targets
 
@@ -33,10 +33,10 @@ def _g1_opposition(human, robot) -> float:
 
 def test_anchored_wrists_sit_in_the_objects_frame_where_the_humans_do():
     human = _pickup()
-    mapping = load_mapping(human.skeleton)
-    info = compute_scale(human, mapping)
-    targets = human_to_targets(human, mapping, scale=info)
-    objects = map_objects(human, info, targets)
+    mapped = map_human(human, load_mapping(human.skeleton))
+    info = compute_scale(mapped)
+    targets = human_to_targets(mapped, scale=info)
+    objects = map_objects(mapped, info, targets)
     hold = human_hold(human)
     assert hold is not None and hold[1] <= SQUEEZE and hold[0].size > 20  # the synthetic PickUp squeezes its box
     frames = hold[0]

@@ -29,6 +29,7 @@ from retarget.mapping import (
     g1_rest,
     human_points,
     load_mapping,
+    map_human,
     mapping_files,
     read_spec,
 )
@@ -181,9 +182,9 @@ def test_rest_pose_targets_are_the_g1_zero_pose(name):
     """In the (upright) rest pose every trunk/leg target is the G1's q = 0 rotation, up to the
     rest pose's heading; legs differ only by the angle between the human's and the G1's bones."""
     clip = upright_rest_clip(clip_named(name), yaw_deg=-141.0)
-    m = load_mapping(clip.skeleton)
-    assert compute_scale(clip, m).reference.label == "rest pose"
-    tg = human_to_targets(clip, m)
+    mh = map_human(clip, load_mapping(clip.skeleton))
+    assert compute_scale(mh).reference.label == "rest pose"
+    tg = human_to_targets(mh)
     g = g1_rest()
     R = {b: rot(tg.quat[0, k]) for k, b in enumerate(tg.body_names)}
     heading = R["pelvis"] @ g.rot["pelvis"].T
@@ -202,8 +203,8 @@ def test_segment_directions_are_carried_over_exactly(name):
     """For every frame the G1 segment axis (body -> its child at q = 0, in the body frame), turned
     by the target rotation, points along the human segment: offsets are computed, not guessed."""
     clip = clip_named(name)
-    m = load_mapping(clip.skeleton)
-    tg, P, g = human_to_targets(clip, m), human_points(clip.joint_pos, clip.skeleton, m), g1_rest()
+    mh = map_human(clip, load_mapping(clip.skeleton))
+    tg, P, g = human_to_targets(mh), mh.points, g1_rest()
     for s in ("left", "right"):
         for body, child in (
             ("hip_pitch_link", "knee_link"),
@@ -221,11 +222,11 @@ def test_segment_directions_are_carried_over_exactly(name):
 @needs_shared
 def test_lafan1_calibrates_on_its_most_upright_frame():
     clip = clip_named("lafan1")
-    m = load_mapping(clip.skeleton)
-    info = compute_scale(clip, m)
+    mh = map_human(clip, load_mapping(clip.skeleton))
+    info = compute_scale(mh)
     assert info.reference.label.startswith("frame ")  # its zero-rotation pose lies along +x
     t = int(info.reference.label.split()[1])
-    tg = human_to_targets(clip, m)
+    tg = human_to_targets(mh)
     for b in ("pelvis", "torso_link", "left_ankle_roll_link", "right_ankle_roll_link"):
         R = rot(tg.quat[t, tg.body_names.index(b)])
         assert tilt_deg(R) < 0.5  # upright trunk, level feet
@@ -235,7 +236,8 @@ def test_lafan1_calibrates_on_its_most_upright_frame():
 def test_positions_only_clip_gets_comparable_orientations(name):
     clip = clip_named(name)
     m = load_mapping(clip.skeleton)
-    with_quat, without = human_to_targets(clip, m), human_to_targets(dataclasses.replace(clip, joint_quat=None), m)
+    with_quat = human_to_targets(map_human(clip, m))
+    without = human_to_targets(map_human(dataclasses.replace(clip, joint_quat=None), m))
     for b in ("pelvis", "left_ankle_roll_link", "right_ankle_roll_link"):
         k = with_quat.body_names.index(b)
         assert np.median(angle_deg(rot(with_quat.quat[:, k]), rot(without.quat[:, k]))) < 8.0
@@ -255,5 +257,5 @@ def test_mixamo_names_map_like_lafan1():
     mixamo = dataclasses.replace(clip, skeleton=skel)
     m = load_mapping(skel)
     assert m.name == "mixamo"
-    a, b = human_to_targets(clip, load_mapping(clip.skeleton)), human_to_targets(mixamo, m)
+    a, b = human_to_targets(map_human(clip, load_mapping(clip.skeleton))), human_to_targets(map_human(mixamo, m))
     assert a.body_names == b.body_names and np.allclose(a.pos, b.pos) and np.allclose(a.quat, b.quat)

@@ -1,11 +1,13 @@
-"""Generic keypoints (.npz / .csv) and the shared unit, up-axis and height helpers."""
+"""Generic keypoints (.npz / .csv), the shared unit and up-axis helpers, and the height estimate
+(pipeline.body_height)."""
 
 import numpy as np
 import pytest
 from mocap_paths import expect_input_error
 
+from pipeline.body_height import estimate_height
 from pipeline.clip import Skeleton
-from pipeline.readers.keypoints import estimate_height, guess_units, read_keypoints_csv, read_keypoints_npz
+from pipeline.readers.keypoints import guess_units, read_keypoints_csv, read_keypoints_npz
 
 NAMES = ["pelvis", "spine", "head", "left_knee", "left_ankle"]
 PARENTS = [-1, 0, 1, 0, 3]

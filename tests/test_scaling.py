@@ -20,7 +20,7 @@ from pipeline.errors import InputError
 from pipeline.robot import g1_xml_path
 from pipeline.rotations import rotation_from_wxyz, wxyz_from_rotation
 from retarget.frames import standing_frame
-from retarget.mapping import g1_rest, load_mapping
+from retarget.mapping import g1_rest, load_mapping, map_human
 from retarget.objects import map_objects, object_bottom
 from retarget.scaling import compute_scale, human_to_targets
 
@@ -29,7 +29,12 @@ SYNTH = {c.task: c for c in default_clips()}
 
 def targets_for(clip: HumanClip, **kw):
     m = load_mapping(clip.skeleton, source=clip.source)
-    return m, compute_scale(clip, m, **kw), human_to_targets(clip, m, **kw)
+    mh = map_human(clip, m)
+    return m, compute_scale(mh, **kw), human_to_targets(mh, **kw)
+
+
+def mapped_synth(task: str):
+    return map_human(SYNTH[task], load_mapping(SYNTH[task].skeleton))
 
 
 def test_g1_lengths_are_measured_from_the_model():
@@ -37,7 +42,7 @@ def test_g1_lengths_are_measured_from_the_model():
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     x = {model.body(i).name: data.xpos[i].copy() for i in range(model.nbody)}
-    info = compute_scale(SYNTH["PickUp"], load_mapping(SYNTH["PickUp"].skeleton))
+    info = compute_scale(mapped_synth("PickUp"))
     d = lambda a, b: np.linalg.norm(x[f"left_{a}"] - x[f"left_{b}"])  # noqa: E731
     assert info.robot["thigh"] == pytest.approx(d("hip_pitch_link", "knee_link"))
     assert info.robot["shank"] == pytest.approx(d("knee_link", "ankle_roll_link"))
@@ -51,7 +56,7 @@ def test_g1_lengths_are_measured_from_the_model():
 
 def test_scale_factors_on_the_synthetic_skeleton():
     """The synthetic SMPL skeleton's bones are known exactly, so the factors are too."""
-    info = compute_scale(SYNTH["PickUp"], load_mapping(SYNTH["PickUp"].skeleton))
+    info = compute_scale(mapped_synth("PickUp"))
     assert info.human["thigh"] == pytest.approx(THIGH) and info.human["shank"] == pytest.approx(SHANK)
     assert info.human["upper_arm"] == pytest.approx(UPPER_ARM) and info.human["forearm"] == pytest.approx(FOREARM)
     assert info.leg == pytest.approx(info.robot["leg"] / (THIGH + SHANK))
@@ -80,7 +85,7 @@ def test_factors_and_standing_pelvis_height(name):
     m, info, tg = targets_for(clip)
     assert (info.leg, info.trunk, info.arm) == pytest.approx(FACTORS[name], abs=2e-3)
     assert tg.scale == info.leg and tg.fps == clip.fps and tg.body_names == m.body_names
-    t = standing_frame(clip.joint_pos, clip.skeleton, m)
+    t = standing_frame(map_human(clip, m).points, m)
     pelvis = tg.pos[t, tg.body_names.index("pelvis"), 2]
     assert pelvis == pytest.approx(g1_rest().pos["pelvis"][2], abs=0.05)
 
@@ -139,7 +144,8 @@ def test_any_start_yaw_and_place_give_the_same_motion(yaw):
     turned_q = (Rz * rotation_from_wxyz(tg.quat.reshape(-1, 4))).as_matrix()
     assert np.abs(turned_q - rotation_from_wxyz(tg2.quat.reshape(-1, 4)).as_matrix()).max() < 1e-9
     assert (tg.foot_contact == tg2.foot_contact).all()
-    o, o2 = map_objects(clip, info, tg)[0], map_objects(clip2, info2, tg2)[0]
+    m2 = map_human(clip2, m)
+    o, o2 = map_objects(map_human(clip, m), info, tg)[0], map_objects(m2, info2, tg2)[0]
     assert np.abs(Rz.apply(o.pose[:, :3]) + t - o2.pose[:, :3]).max() < 1e-9
 
 
@@ -148,7 +154,7 @@ def test_any_start_yaw_and_place_give_the_same_motion(yaw):
 
 def mapped(clip: HumanClip):
     m, info, tg = targets_for(clip)
-    return tg, map_objects(clip, info, tg)
+    return tg, map_objects(map_human(clip, m), info, tg)
 
 
 @pytest.mark.parametrize("task", ["PickUp", "SitStand", "Push", "Carry"])
@@ -205,7 +211,8 @@ def test_omomo_box_follows_the_scaled_interaction():
         np.linalg.norm(o.pose[-1, :2] - o.pose[0, :2]),
         np.linalg.norm(h.pose[-1, :2] - h.pose[0, :2]),
     )
-    assert travel == pytest.approx(compute_scale(clip, load_mapping(clip.skeleton)).leg * human_travel, rel=0.15)
+    leg = compute_scale(map_human(clip, load_mapping(clip.skeleton))).leg
+    assert travel == pytest.approx(leg * human_travel, rel=0.15)
 
 
 # --- bad input -------------------------------------------------------------------------------------
@@ -215,19 +222,20 @@ def test_height_out_of_range_needs_an_override():
     clip = dataclasses.replace(SYNTH["PickUp"], subject_height=2.5)
     m = load_mapping(clip.skeleton)
     with pytest.raises(InputError) as info:
-        human_to_targets(clip, m)
+        human_to_targets(map_human(clip, m))
     assert (
         info.value.field == "subject_height" and "2.500 m" in str(info.value) and "height_override" in str(info.value)
     )
-    tg = human_to_targets(clip, m, height_override=2.5)
-    assert compute_scale(clip, m, height_override=2.5).height_source == "override" and tg.frames == clip.frames
+    tg = human_to_targets(map_human(clip, m), height_override=2.5)
+    assert compute_scale(map_human(clip, m), height_override=2.5).height_source == "override"
+    assert tg.frames == clip.frames
     short = dataclasses.replace(SYNTH["PickUp"], subject_height=0.8)
     with pytest.raises(InputError, match="subject_height: 0.800 m"):
-        compute_scale(short, m)
+        compute_scale(map_human(short, m))
     with pytest.raises(InputError) as info:
-        compute_scale(clip, m, height_override=-1.0)
+        compute_scale(map_human(clip, m), height_override=-1.0)
     assert info.value.field == "height_override"
-    estimated = compute_scale(dataclasses.replace(SYNTH["PickUp"], subject_height=None), m)
+    estimated = compute_scale(map_human(dataclasses.replace(SYNTH["PickUp"], subject_height=None), m))
     assert estimated.height_source == "estimate" and 1.5 < estimated.subject_height < 1.9
 
 
@@ -237,7 +245,7 @@ def test_clip_shorter_than_two_frames():
         clip.skeleton, clip.joint_pos[:1], clip.fps, "one.bvh", subject_height=1.7, joint_quat=clip.joint_quat[:1]
     )
     with pytest.raises(InputError) as info:
-        human_to_targets(one, load_mapping(one.skeleton))
+        human_to_targets(map_human(one, load_mapping(one.skeleton)))
     assert str(info.value).startswith("one.bvh: joint_pos: ") and "at least 2" in str(info.value)
 
 
@@ -247,13 +255,14 @@ def test_object_track_without_geometry():
     clip = dataclasses.replace(clip, objects=(bad,))
     m = load_mapping(clip.skeleton)
     with pytest.raises(InputError) as info:
-        human_to_targets(clip, m)
+        human_to_targets(map_human(clip, m))
     assert info.value.field == "object box geometry" and str(info.value).startswith("scan.pt: ")
     with pytest.raises(InputError):
-        map_objects(clip, compute_scale(dataclasses.replace(clip, objects=()), m))
+        map_objects(map_human(clip, m), compute_scale(map_human(dataclasses.replace(clip, objects=()), m)))
 
 
 def test_no_objects_maps_to_none():
     clip = dataclasses.replace(SYNTH["PickUp"], objects=())
     m = load_mapping(clip.skeleton)
-    assert map_objects(clip, compute_scale(clip, m)) == ()
+    mh = map_human(clip, m)
+    assert map_objects(mh, compute_scale(mh)) == ()

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from pipeline.body_height import plausible_height
 from pipeline.clip import HumanClip, Skeleton
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.readers.keypoints import load_npz
@@ -199,7 +200,7 @@ def read_amass(path: str | Path, body_model: str | Path | None = None) -> HumanC
         )
     model_file = _model_file(body_model, kind, gender, src)
     joints, height = _run_model(model_file, kind, gender, poses, trans, betas, src)
-    height = height if 0.3 < height < 3.0 else None
+    height = plausible_height(height)
     return HumanClip(
         SMPLH_SKELETON, joints, float(data["fps"][0]), src, subject_height=height, joint_quat=global_orientations(poses)
     )

@@ -18,7 +18,7 @@ Conventions, as read here:
   averaged over frames (see :func:`guess_up`).
 * Height: the rest pose (offsets, zero rotations) when it stands upright (its up extent is at
   least 3/4 of its widest horizontal extent, as in a T-pose), else the head-to-ankle bone path
-  (:func:`~pipeline.readers.keypoints.estimate_height`). ``units="auto"`` picks the unit that
+  (:func:`~pipeline.body_height.estimate_height`). ``units="auto"`` picks the unit that
   makes that height closest to 1.7 m.
 """
 
@@ -30,9 +30,10 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from pipeline.body_height import estimate_height, plausible_height
 from pipeline.clip import HumanClip, Skeleton
 from pipeline.errors import InputError
-from pipeline.readers.keypoints import estimate_height, guess_units, plausible_height, unit_scale, up_matrix
+from pipeline.readers.keypoints import guess_units, unit_scale, up_matrix
 from pipeline.rotations import wxyz_from_rotation
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}

@@ -1,5 +1,5 @@
-"""Generic keypoints: ``.npz`` / ``.csv`` joint positions, and the unit / up-axis / height
-helpers every reader shares.
+"""Generic keypoints: ``.npz`` / ``.csv`` joint positions, and the unit and up-axis helpers every
+reader shares (the height estimate is :mod:`pipeline.body_height`).
 
 Conventions
 -----------
@@ -8,10 +8,8 @@ Conventions
   ratio) to a 1.7 m human; it therefore misreads a 1.07 m child in cm as inches.
 * Up axis: ``"z"`` leaves points alone; ``"y"`` applies :data:`~pipeline.rotations.Y_UP_TO_Z_UP`
   (+90 deg about x: ``(x, y, z) -> (x, -z, y)``), a proper rotation, so handedness is kept.
-* Height: the tree path from the head joint to an ankle, with bone lengths taken as the
-  median over frames (pose independent), times :data:`HEAD_TO_ANKLE_TO_STATURE`. The factor
-  was measured on OMOMO subjects with known height (sub2 1.844 m, sub3 1.941 m: 1.121 and
-  1.115). It needs joints named like ``head`` and ``ankle``/``foot``; otherwise ``None``.
+* Height: the skeleton's head-to-ankle estimate, :func:`pipeline.body_height.estimate_height`
+  (``None`` without joints named like ``head`` and ``ankle``/``foot``).
 
 Keypoint files
 --------------
@@ -35,13 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.body_height import estimate_height, plausible_height
 from pipeline.clip import HumanClip, Skeleton
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.rotations import Y_UP_TO_Z_UP
 
 UNIT_SCALE: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254}
 HUMAN_HEIGHT_M = 1.7
-HEAD_TO_ANKLE_TO_STATURE = 1.118
 
 
 _PICKLE_ALLOWED = {
@@ -93,54 +91,6 @@ def up_matrix(up: str, source: str | Path) -> np.ndarray:
     if up == "y":
         return Y_UP_TO_Z_UP.copy()
     raise InputError(source, "up", f"unknown up axis {up!r}; use 'y' or 'z'")
-
-
-def find_joint(names: tuple[str, ...], *keys: str) -> int | None:
-    """First joint whose lower-cased name contains ``keys[0]`` (then ``keys[1]``, ...)."""
-    low = [n.lower() for n in names]
-    for k in keys:
-        for i, n in enumerate(low):
-            if k in n:
-                return i
-    return None
-
-
-def _tree_path(parents: tuple[int, ...], a: int, b: int) -> list[tuple[int, int]]:
-    """Bones ``(child, parent)`` on the path between joints ``a`` and ``b``; empty if unconnected."""
-
-    def up(j: int) -> list[int]:
-        chain = [j]
-        while parents[chain[-1]] >= 0:
-            chain.append(parents[chain[-1]])
-        return chain
-
-    ca, cb = up(a), up(b)
-    common = next((j for j in ca if j in cb), None)
-    if common is None:
-        return []
-    bones = [(j, parents[j]) for j in ca[: ca.index(common)]]
-    return bones + [(j, parents[j]) for j in cb[: cb.index(common)]]
-
-
-def estimate_height(joint_pos: np.ndarray, skeleton: Skeleton) -> float | None:
-    """Stature (file units) from the head-to-ankle bone path; ``None`` if those joints are unknown."""
-    names = skeleton.joint_names
-    head = find_joint(names, "head")
-    low = [n.lower() for n in names]
-    ankles = [i for i, n in enumerate(low) if "ankle" in n] or [i for i, n in enumerate(low) if "foot" in n]
-    if head is None or not ankles:
-        return None
-    best = 0.0
-    for ankle in ankles:
-        bones = _tree_path(skeleton.parents, head, ankle)
-        length = sum(float(np.median(np.linalg.norm(joint_pos[:, c] - joint_pos[:, p], axis=-1))) for c, p in bones)
-        best = max(best, length)
-    return best * HEAD_TO_ANKLE_TO_STATURE if best > 0 else None
-
-
-def plausible_height(h: float | None) -> float | None:
-    """``h`` if it is a human height in metres (0.3-3 m), else ``None``."""
-    return float(h) if h is not None and np.isfinite(h) and 0.3 < h < 3.0 else None
 
 
 def keypoints_clip(

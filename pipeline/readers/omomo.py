@@ -41,7 +41,7 @@ by how far the mesh's convex hull stands off its surface (:func:`hull_gap_ratio`
 hull volume with the bounding box does not work: a table's hull nearly fills its box.
 
 Subject height: ``height_dict.pkl`` beside the clip (``{"sub3": 1.941, ...}``, metres, 17
-OMOMO subjects), else the skeleton estimate of :func:`~pipeline.readers.keypoints.estimate_height`.
+OMOMO subjects), else the skeleton estimate of :func:`~pipeline.body_height.estimate_height`.
 """
 
 from __future__ import annotations
@@ -51,12 +51,13 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.body_height import estimate_height, plausible_height
 from pipeline.clip import HumanClip, ObjectTrack
 from pipeline.errors import InputError, first_bad_frame
 from pipeline.geometry import MeshGeometry
 from pipeline.materials import object_physics_for
 from pipeline.readers.amass import SMPLH_FINGERS, SMPLH_JOINT_NAMES, SMPLH_SKELETON
-from pipeline.readers.keypoints import estimate_height, load_numpy_pickle, plausible_height
+from pipeline.readers.keypoints import load_numpy_pickle
 from pipeline.rotations import xyzw_to_wxyz
 
 FPS = 30.0
