@@ -14,6 +14,7 @@ from pipeline.clip import HumanClip, RobotClip
 from pipeline.errors import InputError
 from pipeline.scene import SceneObject, build_scene
 from pipeline.take import human_hold, object_field
+from pipeline.terms.layout import CONTROL_FPS
 from retarget.contact import link_contact_flags
 from retarget.grip import SQUEEZE, anchored_targets, g1_opposition
 from retarget.ik import G1Retargeter
@@ -22,7 +23,7 @@ from retarget.metrics import DEFAULT_LINK_MAP, retarget_metrics
 from retarget.objects import map_objects
 from retarget.scaling import compute_scale, human_to_targets
 
-FPS = 50
+FPS = CONTROL_FPS
 METHOD = "lessmimic-mink"
 
 
