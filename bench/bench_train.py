@@ -117,7 +117,7 @@ def post_training_table(name: str, envs: int, iterations: int = 4, repeats: int 
 
     from train.aip import PostTrainConfig, build, iteration
     from train.bc import BCConfig, train_bc
-    from train.envs.cpu.vec_env import PostEnvConfig
+    from train.envs.config import PostEnvConfig
     from train.policy import PolicyConfig
     from train.vae import VAEConfig
 

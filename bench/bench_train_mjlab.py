@@ -21,7 +21,7 @@ from dataclasses import replace
 import torch
 
 from train.aip import PostTrainConfig, build, iteration
-from train.envs.cpu.vec_env import PostEnvConfig
+from train.envs.config import PostEnvConfig
 from train.envs.mjlab.env import MjlabPostTrainEnv, runnable_episodes
 from train.episodes import load_episodes
 from train.policy import load_policy

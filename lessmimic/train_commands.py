@@ -83,7 +83,7 @@ def _cmd_train_aip(a: argparse.Namespace) -> int:
 
     from train.ablation import PRE_TRAINING, ablated
     from train.aip import PostTrainConfig, post_train
-    from train.envs.cpu.vec_env import PostEnvConfig
+    from train.envs.config import PostEnvConfig
 
     torch.set_num_threads(a.threads)
     ab = ablated(a.name, a.run, a.ablation, "post")

@@ -9,9 +9,9 @@ import torch
 
 from pipeline.errors import InputError
 from pipeline.geometry import Primitive
+from train.envs.config import PostEnvConfig
 from train.envs.cpu.env import EnvConfig, InteractionEnv
 from train.envs.cpu.rewards import task_rewards
-from train.envs.cpu.vec_env import PostEnvConfig
 from train.envs.mjlab.object import MODEL_FIELDS
 from train.mdp import rewards as R
 from train.mdp.randomize import RandomizationConfig, draw, stack

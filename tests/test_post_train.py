@@ -12,7 +12,8 @@ import torch
 from pipeline.errors import InputError
 from pipeline.terms.layout import AMP_STATE
 from train.aip import PostTrainConfig, post_train, reference_buffers
-from train.envs.cpu.vec_env import PostEnvConfig, PostTrainEnv
+from train.envs.config import PostEnvConfig
+from train.envs.cpu.vec_env import PostTrainEnv
 from train.episodes import load_episodes
 from train.policy import load_policy
 from train.rl_model import InteractionActor

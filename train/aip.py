@@ -45,7 +45,8 @@ from pipeline.stage.paths import stage_dir
 from pipeline.terms.layout import AMP_STATE, DF, PROPRIO
 from train.ablation import POST_TRAINING
 from train.discriminator import Discriminator, DiscriminatorConfig
-from train.envs.cpu.vec_env import PostEnvConfig, PostTrainEnv
+from train.envs.config import PostEnvConfig
+from train.envs.cpu.vec_env import PostTrainEnv
 from train.episodes import load_episodes
 from train.mdp.randomize import RandomizationConfig
 from train.mdp.rewards import RewardWeights, lsgan_reward

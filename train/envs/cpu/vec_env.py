@@ -21,7 +21,7 @@ history, and the task rewards of the paper's table (:mod:`train.mdp.rewards`) me
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 import torch
@@ -30,23 +30,11 @@ from tensordict import TensorDict
 
 from pipeline.robot import NUM_JOINTS
 from pipeline.terms.layout import AMP_STATE, ObservationLayout
+from train.envs.config import PostEnvConfig
 from train.envs.cpu.env import EnvConfig, History, InteractionEnv, Obs
 from train.envs.cpu.rewards import task_rewards
 from train.episodes import Episode
-from train.mdp import rewards as R
-from train.mdp.randomize import RandomizationConfig, Variation, actuation_noise, draw, perception_noise
-
-
-@dataclass(frozen=True)
-class PostEnvConfig:
-    """``envs`` environments stepped in ``threads`` threads; the ``randomization`` ranges; the reward ``weights``;
-    ``seed`` of the draws."""
-
-    envs: int = 8
-    threads: int = 1
-    randomization: RandomizationConfig = field(default_factory=RandomizationConfig)
-    weights: R.RewardWeights = field(default_factory=R.RewardWeights)
-    seed: int = 0
+from train.mdp.randomize import Variation, actuation_noise, draw, perception_noise
 
 
 class PostTrainEnv(VecEnv):

@@ -59,7 +59,7 @@ from pipeline.errors import InputError
 from pipeline.robot import NUM_JOINTS
 from pipeline.scene import IMPRATIO, SceneObject, build_spec
 from pipeline.terms.layout import AMP_STATE, DF_LINKS, PHYSICS_TIMESTEP, SUBSTEPS, ObservationLayout
-from train.envs.cpu.vec_env import PostEnvConfig
+from train.envs.config import PostEnvConfig
 from train.envs.mjlab.actions import NoisyJointTargetsCfg
 from train.envs.mjlab.events import start_episodes
 from train.envs.mjlab.object import add_object_floor_pairs, entity_spec
