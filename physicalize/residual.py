@@ -22,7 +22,7 @@ Reward per step (after the hold, against reference frame ``t + 1``), exp kernels
     r = w_q k(|q - q*|) + w_p k(|p - p*|) + w_R k(angle(R^T R*)) + w_f k(sqrt(sum_feet |x_f - x*_f|^2))
         + w_o k(|x_o - x*_o|) + w_alive - w_rate |a - a_prev|^2
 
-(``w_o`` term is 1 without an object). An episode ends on a fall (:func:`physicalize.rollout.fallen`,
+(``w_o`` term is 1 without an object). An episode ends on a fall (:func:`pipeline.terms.fall.fallen`,
 a termination) or at the clip's end / ``max_episode_frames`` (a time-out, bootstrapped by PPO).
 Episodes start at random frames of the clip from the reference state (the velocity: median of the
 next 5 reference frames), objects at their reference pose at rest.

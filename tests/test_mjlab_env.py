@@ -73,7 +73,7 @@ def test_the_same_state_gives_the_same_observation_and_reward(episodes, mjlab_en
         "root_command": O.root_command(env, worlds),
         "df": O.interaction(env, worlds, links),
     }
-    native, warp = cpu.slots[0].scene.model.opt, env.sim.mj_model.opt  # the solver options mjlab_env._options copies
+    native, warp = cpu.slots[0].scene.model.opt, env.sim.mj_model.opt  # what envs.mjlab.env._options copies
     for name in ("timestep", "integrator", "cone", "impratio"):
         assert getattr(warp, name) == getattr(native, name), name
     _check_object_fields(env, cpu)

@@ -16,7 +16,7 @@ simulated state (:class:`TaskMeter`, one per environment):
   every episode 82% at scale 1.0); body-dominated contact (more frames of other links on the object than of
   hands) counts as failure (rate 0). Its ``success`` is ``rate >= Rules.push_success_rate``.
 
-A fall (:func:`physicalize.rollout.fallen`) ends the episode; what was achieved before it stands.
+A fall (:func:`pipeline.terms.fall.fallen`) ends the episode; what was achieved before it stands.
 """
 
 from __future__ import annotations
