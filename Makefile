@@ -94,7 +94,7 @@ corpus: install
 # Laptop scale by default (2 CPU cores, ~55 min on the 100-clip corpus: VAE + BC ~8 min, 20 DAgger iterations ~2.3 min
 # each); resumable, and TRAIN_ARGS="--dagger-iterations 40" continues a finished run; TRAIN_ARGS for more, e.g.
 # TRAIN_ARGS="--bc-steps 200000 --device cuda". `make eval` scores the run's policy and the QP teacher baseline
-# (Table 2 cells, 3 evaluation seeds x 4 episodes per cell) into runs/$(RUN)/eval/.
+# (Table 2 cells, 3 evaluation seeds x 16 episodes per cell, each with its 95% interval) into runs/$(RUN)/eval/.
 RUN ?= bc
 TRAIN_ARGS ?=
 train-bc: install

@@ -27,6 +27,7 @@ def _cmd_train_bc(a: argparse.Namespace) -> int:
         dagger_probe=a.dagger_probe,
         dagger_fit_steps=a.dagger_fit_steps,
         envs=a.envs,
+        select_episodes=a.select_episodes,
         seed=a.seed,
         device=a.device,
     )
@@ -37,7 +38,7 @@ def _cmd_train_bc(a: argparse.Namespace) -> int:
         f"trained {report['policy']} in {report['seconds'] / 60:.1f} min: {scale['corpus_episodes']} corpus episodes "
         f"({scale['corpus_frames']} frames), BC {scale['bc_steps']} steps x {cfg.batch}, DAgger "
         f"{scale['dagger_iterations']} iterations ({scale['dagger_windows']} windows); last on-policy action RMSE "
-        f"{rmse:.3f} rad, rollout success {success:.2f}"
+        f"{rmse:.3f} rad, rollout success {success:.2f}; policy.pt is {scale['chosen_checkpoint']}"
     )
     return 0
 
@@ -142,6 +143,12 @@ def add_train(sub) -> None:
     p.add_argument("--dagger-probe", type=int, default=d.dagger_probe, help="student-only episodes per iteration")
     p.add_argument("--dagger-fit-steps", type=int, default=d.dagger_fit_steps)
     p.add_argument("--envs", type=int, default=d.envs, help="environments stepped together")
+    p.add_argument(
+        "--select-episodes",
+        type=int,
+        default=d.select_episodes,
+        help="validation rollouts per task and DAgger checkpoint that choose policy.pt (0: the last iteration's)",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (1 is fastest on a loaded 2-core machine)")
@@ -175,7 +182,12 @@ def add_train(sub) -> None:
     p.add_argument("--teacher", action="store_true", help="also score the QP teacher tracking the 1.0x reference")
     p.add_argument("--name", default="corpus", help="the corpus whose episodes are evaluated (default corpus)")
     p.add_argument("--seeds", default="0,1,2", help="evaluation seeds (default 0,1,2)")
-    p.add_argument("--episodes", type=int, default=4, help="episodes per cell and seed (default 4)")
+    p.add_argument(
+        "--episodes",
+        type=int,
+        default=16,
+        help="episodes per cell and seed (default 16: a cell's 95%% interval ~+-10-13)",
+    )
     p.add_argument("--envs", type=int, default=8)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument(

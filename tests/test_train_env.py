@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+import torch
 
 from features.stage import run_stage as features_stage
 from lessmimic.chain import retarget as retarget_stage
@@ -13,10 +14,13 @@ from pipeline.dataset.read import episode_ranges, read_columns
 from pipeline.errors import InputError
 from pipeline.stage.paths import stage_dir
 from train.actors import TeacherActor
+from train.bc import BCConfig, train_bc
 from train.envs.cpu.env import InteractionEnv
 from train.episodes import load_episodes, scaled_objects
-from train.evaluation.table2 import EvalConfig, evaluate, markdown, scale_line, scale_note
+from train.evaluation.table2 import EvalConfig, evaluate, interval95, markdown, scale_line, scale_note
+from train.policy import PolicyConfig
 from train.teacher import Teacher
+from train.vae import VAEConfig
 
 
 @pytest.fixture(scope="module")
@@ -121,6 +125,18 @@ def test_scaled_objects_rest_on_the_floor_and_the_command_does_not_change(corpus
         env.reset_one(0, corpus[0], 2.0)
 
 
+def test_a_cells_interval_is_wilsons_for_successes_and_students_t_for_contact_rates():
+    low, high = interval95([1.0] * 30 + [0.0] * 18, binary=True)  # 30 of 48
+    assert np.isclose(low, 0.4836, atol=1e-4) and np.isclose(high, 0.7478, atol=1e-4)
+    low, high = interval95([0.0] * 10, binary=True)  # none of 10: not the empty [0, 0] of the normal approximation
+    assert low == 0.0 and 0.25 < high < 0.31
+    rates = [0.9, 0.8, 0.85, 0.95, 0.7, 0.88]
+    low, high = interval95(rates, binary=False)
+    half = 2.5706 * np.std(rates, ddof=1) / np.sqrt(6)  # t(0.975, 5)
+    assert np.isclose(low, np.mean(rates) - half, atol=1e-4) and np.isclose(high, np.mean(rates) + half, atol=1e-4)
+    assert interval95([1.0, 1.0], binary=False) == (1.0, 1.0)
+
+
 def test_the_evaluation_harness_scores_the_teacher(corpus, tmp_path):
     result = evaluate(TeacherActor(), corpus, EvalConfig(seeds=(0,), episodes=1, tasks=("PickUp", "Push")), "teacher")
     cells = result["cells"]
@@ -136,7 +152,8 @@ def test_the_evaluation_harness_scores_the_teacher(corpus, tmp_path):
     }
     assert cells["PickUp@1"]["mean"] == 1.0 and cells["Push@1"]["mean"] > 0.9
     row = markdown([result]).splitlines()[2].split(" | ")
-    assert row[0] == "| teacher" and row[3] == "100.0 +- 0.0" and row[6:9] == ["-", "-", "-"]  # PickUp 1.0; no SitStand
+    assert row[0] == "| teacher" and row[3] == "100.0 (21-100)" and row[6:9] == ["-", "-", "-"]  # PickUp 1.0 (1 of 1)
+    assert cells["PickUp@1"]["episodes"] == 1 and cells["PickUp@1"]["ci95"][1] == 1.0
     note = scale_note("train", EvalConfig(seeds=(0,), episodes=1), tmp_path / "p.pt")  # no report.json beside it
     assert note["policy"]["training_scale"] == "unknown"
     assert "1 episodes per cell and seed" in scale_line(note) and "trained on unknown" in scale_line(note)
@@ -231,3 +248,75 @@ def test_a_run_folder_takes_more_dagger_iterations_and_refuses_other_settings(tm
             _claim(run, other, overwrite=False)
     _claim(run, TrainConfig(bc_steps=1), overwrite=True)
     assert '"bc_steps": 1' in (run / "config.json").read_text()
+    old = json.loads((run / "config.json").read_text())
+    del old["select_episodes"]  # a run folder written before the setting existed: its default
+    (run / "config.json").write_text(json.dumps(old))
+    _claim(run, TrainConfig(bc_steps=1), overwrite=False)
+    _claim(run, TrainConfig(bc_steps=1, select_episodes=4), overwrite=False)  # another choice, the same training
+
+
+def _smoke(seed: int):
+    from train.run import TrainConfig
+
+    return TrainConfig(name="train", vae_steps=20, bc_steps=20, batch=32, dagger_iterations=2, dagger_episodes=2,
+                       dagger_probe=1, dagger_fit_steps=10, envs=2, select_episodes=1, seed=seed)  # fmt: skip
+
+
+@pytest.mark.slow
+def test_the_same_seed_twice_gives_the_same_policy_and_the_same_choice(corpus, tmp_path):
+    """Determinism at smoke scale (VAE, BC, two DAgger iterations, the checkpoint choice): one torch thread and one
+    environment thread, the defaults, give identical weights for the same seed; another seed does not."""
+    from train.run import train
+
+    torch.set_num_threads(1)
+    reports = [train(_smoke(seed), tmp_path / name) for seed, name in ((0, "a"), (0, "b"), (1, "c"))]
+    a, b, c = (torch.load(tmp_path / n / "policy.pt", weights_only=True) for n in "abc")
+    for key in ("backbone", "vae"):
+        flat = [(k, v) for k, v in _tensors(a[key])]
+        assert all(torch.equal(v, w) for (_, v), (_, w) in zip(flat, _tensors(b[key]))), key
+    assert not all(torch.equal(v, w) for (_, v), (_, w) in zip(_tensors(a["backbone"]), _tensors(c["backbone"])))
+    assert a["chosen_from"] == b["chosen_from"] == reports[0]["scale"]["chosen_checkpoint"]
+    assert (tmp_path / "a" / "validation.jsonl").read_text() == (tmp_path / "b" / "validation.jsonl").read_text()
+
+
+def _tensors(d, prefix=""):
+    """(name, tensor) pairs of a nested checkpoint dict, in order."""
+    for k, v in d.items():
+        if isinstance(v, dict):
+            yield from _tensors(v, f"{prefix}{k}.")
+        elif isinstance(v, torch.Tensor):
+            yield prefix + k, v
+
+
+def test_the_checkpoint_is_chosen_by_its_worst_task_relative_to_the_teacher(corpus, tmp_path):
+    """Validation rows (here written beforehand, as a resumed choice finds them): the last iteration is best on
+    average but lost SitStand, the middle one is best on its worst task; Carry, which the teacher rarely completes,
+    does not decide alone. The choice is logged and policy.pt becomes that checkpoint."""
+    from dataclasses import asdict
+
+    from train.evaluation.select import SelectConfig, choose, validation_episodes
+
+    cfg = SelectConfig(episodes=1)
+    features = stage_dir("train", "features")
+    train_bc(features, tmp_path, BCConfig(steps=5, log_every=5), PolicyConfig(), VAEConfig(), vae_steps=5)
+    for i in range(3):
+        (tmp_path / f"policy_dagger{i}.pt").write_bytes((tmp_path / "policy.pt").read_bytes())
+    teacher = {"PickUp": 1.0, "SitStand": 1.0, "Push": 1.0, "Carry": 0.25}
+    scores = [
+        {"PickUp": 0.2, "SitStand": 0.2, "Push": 0.5, "Carry": 0.0},
+        {"PickUp": 0.6, "SitStand": 0.5, "Push": 0.7, "Carry": 0.125},  # worst: SitStand 0.5
+        {"PickUp": 0.9, "SitStand": 0.1, "Push": 0.9, "Carry": 0.25},  # best mean, worst: SitStand 0.1
+    ]
+    rows = [{"checkpoint": "teacher", "scores": teacher, "config": asdict(cfg)}]
+    for i, s in enumerate(scores):
+        ratio = [v / max(teacher[t], 0.05) for t, v in s.items()]
+        rows.append({"checkpoint": f"policy_dagger{i}.pt", "scores": s, "worst_ratio": min(ratio),
+                     "mean_ratio": float(np.mean(ratio)), "config": asdict(cfg)})  # fmt: skip
+    (tmp_path / "validation.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    choice = choose(tmp_path, corpus[:1], corpus[1:], cfg)
+    assert choice["chosen"] == "policy_dagger1.pt" and choice["last"] == "policy_dagger2.pt"
+    assert torch.load(tmp_path / "policy.pt", weights_only=True)["chosen_from"] == "policy_dagger1.pt"
+    assert json.loads((tmp_path / "selection.json").read_text())["chosen_scores"] == scores[1]
+    episodes, origin = validation_episodes(corpus[:1], corpus[1:])
+    assert origin[corpus[0].task] == "held out" and list(origin.values()).count("training") == len(corpus) - 1
+    assert sorted(e.task for e in episodes) == sorted(e.task for e in corpus)

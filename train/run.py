@@ -4,8 +4,10 @@
    ``vae.pt``, ``bc_log.jsonl``, ``bc_report.json``, ``policy_bc.pt``;
 2. DAgger from the QP teacher in the interaction environment (:func:`train.dagger.dagger`):
    ``dagger_log.jsonl``, ``policy_dagger<i>.pt``, ``dagger_data.pt``;
-3. ``policy.pt``: the run's policy, and ``report.json`` (written last) with the run's scale: corpus episodes and
-   frames, BC steps and samples, DAgger iterations and windows, seconds.
+3. ``policy.pt``: the run's policy, the DAgger iteration whose student does best on its worst task in validation
+   rollouts (:mod:`train.evaluation.select`: ``validation.jsonl``, ``selection.json``), and ``report.json``
+   (written last) with the run's scale: corpus episodes and frames, BC steps and samples, DAgger iterations and
+   windows, the chosen checkpoint, seconds.
 
 A rerun with the same config resumes: finished parts are kept (the VAE, the BC policy, finished DAgger
 iterations). A rerun asking only for more DAgger iterations continues the run (iteration ``i`` depends on the
@@ -27,6 +29,7 @@ from pipeline.terms.layout import HISTORY
 from train.bc import BCConfig, WindowTensors, train_bc
 from train.dagger import DAggerConfig, dagger, read_log
 from train.episodes import load_episodes
+from train.evaluation.select import SelectConfig, choose
 from train.policy import PolicyConfig, load_policy, save_policy
 from train.vae import VAEConfig, split_episodes
 
@@ -46,6 +49,7 @@ class TrainConfig:
     dagger_probe: int = 8
     dagger_fit_steps: int = 1500
     envs: int = 8
+    select_episodes: int = 12  # validation rollouts per task and checkpoint (train.evaluation.select); 0: the last
     seed: int = 0
     device: str = "cpu"
 
@@ -57,10 +61,10 @@ def _claim(run_dir: Path, config: TrainConfig, overwrite: bool) -> None:
     if overwrite and run_dir.exists():
         shutil.rmtree(run_dir)
     if path.is_file():
-        recorded = json.loads(path.read_text())
+        recorded = {**asdict(TrainConfig()), **json.loads(path.read_text())}  # a setting added since: its default
         diff = sorted(k for k in settings if recorded.get(k) != settings[k])
         longer = diff == ["dagger_iterations"] and settings["dagger_iterations"] > recorded["dagger_iterations"]
-        if diff and not longer:
+        if diff and not longer and diff != ["select_episodes"]:  # another choice of checkpoint: the same training
             msg = f"a run with other settings ({', '.join(diff)}) is here; pass --overwrite"
             raise InputError(run_dir, "config", msg)
     write_json_atomic(path, settings)
@@ -99,6 +103,11 @@ def train(config: TrainConfig, run_dir: str | Path, *, overwrite: bool = False) 
     )
     valid = [episodes[i] for i in train_eps if episodes[i].simulated.validation.get("valid", False)]
     dagger(policy, data, valid, run_dir, dagger_config, bc, heldout)
+    chosen = f"policy_dagger{config.dagger_iterations - 1}.pt"
+    if config.select_episodes > 0:
+        held_valid = [episodes[i] for i in held if episodes[i].simulated.validation.get("valid", False)]
+        select = SelectConfig(episodes=config.select_episodes, envs=config.envs)
+        chosen = choose(run_dir, held_valid, valid, select)["chosen"]
     rows = read_log(run_dir)
     last = rows[-1] if rows else {}
     bc_seconds = json.loads((run_dir / "bc_report.json").read_text()).get("seconds", 0.0)
@@ -114,6 +123,7 @@ def train(config: TrainConfig, run_dir: str | Path, *, overwrite: bool = False) 
             "dagger_episodes_per_iteration": config.dagger_episodes,
             "dagger_windows": last.get("aggregated_windows", 0),
             "dagger_last": last,
+            "chosen_checkpoint": chosen,
             "device": config.device,
         },
         "policy": str(run_dir / "policy.pt"),

@@ -25,6 +25,7 @@ from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
 from pipeline.terms.observations import heading_yaw
 from train.envs.cpu.env import InteractionEnv
 from train.episodes import Episode
+from train.evaluation.table2 import cell_text, interval95
 
 CHAIN_LENGTHS = (5, 10, 15, 25, 40)
 ENDINGS = ("completed", "fell", "strayed", "task_failed")
@@ -148,6 +149,7 @@ def evaluate_chains(actor, episodes: list[Episode], cfg: ChainConfig = ChainConf
             outcomes += runs
         out["lengths"][str(n)] = {
             "mean": float(np.mean(per_seed)),
+            "ci95": list(interval95([r["success"] for r in outcomes], binary=True)),
             "std": float(np.std(per_seed)),
             "per_seed": per_seed,
             "chains_per_seed": cfg.chains,
@@ -159,16 +161,13 @@ def evaluate_chains(actor, episodes: list[Episode], cfg: ChainConfig = ChainConf
 
 
 def markdown(result: dict) -> str:
-    """Table 3's layout: success (%) per chain length, mean +- std over seeds, and the tasks completed."""
+    """Table 3's layout: success (%) per chain length with its 95% interval, and the tasks completed."""
     lengths = list(result["lengths"])
     lines = [
         "| | " + " | ".join(f"N = {n}" for n in lengths) + " |",
         "|---" * (len(lengths) + 1) + "|",
         f"| {result['label']} | "
-        + " | ".join(
-            f"{100 * c['mean']:.1f} +- {100 * c['std']:.1f} ({c['mean_tasks_completed']:.1f} tasks)"
-            for c in result["lengths"].values()
-        )
+        + " | ".join(f"{cell_text(c)}, {c['mean_tasks_completed']:.1f} tasks" for c in result["lengths"].values())
         + " |",
     ]
     return "\n".join(lines) + "\n"
