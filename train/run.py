@@ -101,13 +101,16 @@ def train(config: TrainConfig, run_dir: str | Path, *, overwrite: bool = False) 
         fit_steps=config.dagger_fit_steps,
         seed=config.seed,
     )
-    valid = [episodes[i] for i in train_eps if episodes[i].simulated.validation.get("valid", False)]
-    dagger(policy, data, valid, run_dir, dagger_config, bc, heldout)
+
+    def valid(indices: list[int]) -> list:
+        return [episodes[i] for i in indices if episodes[i].simulated.validation.get("valid", False)]
+
+    train_valid = valid(train_eps)
+    dagger(policy, data, train_valid, run_dir, dagger_config, bc, heldout)
     chosen = f"policy_dagger{config.dagger_iterations - 1}.pt"
     if config.select_episodes > 0:
-        held_valid = [episodes[i] for i in held if episodes[i].simulated.validation.get("valid", False)]
         select = SelectConfig(episodes=config.select_episodes, envs=config.envs)
-        chosen = choose(run_dir, held_valid, valid, select)["chosen"]
+        chosen = choose(run_dir, valid(held), train_valid, select)["chosen"]
     rows = read_log(run_dir)
     last = rows[-1] if rows else {}
     bc_seconds = json.loads((run_dir / "bc_report.json").read_text()).get("seconds", 0.0)
