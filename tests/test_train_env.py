@@ -174,7 +174,8 @@ def test_the_evaluation_harness_scores_the_teacher(corpus, tmp_path):
 
 def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):
     """BC on the corpus, then DAgger: the student's visited states labelled by the teacher, the refit logged; a rerun
-    resumes after the finished iteration and a second iteration adds one row."""
+    resumes after the finished iteration and a second iteration adds one row, with the optimiser's moments carried
+    over: the resumed run's weights are those of two iterations in one go."""
     import json
     from dataclasses import replace
 
@@ -186,6 +187,7 @@ def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):
 
     features = stage_dir("train", "features")
     train_bc(features, tmp_path, BCConfig(steps=30, log_every=10), PolicyConfig(), VAEConfig(), vae_steps=30)
+    (tmp_path / "policy_bc.pt").write_bytes((tmp_path / "policy.pt").read_bytes())
     data = WindowTensors.from_dataset(features, 5)
     cfg = DAggerConfig(iterations=1, episodes=2, probe=1, envs=2, fit_steps=20)
     dagger(load_policy(tmp_path / "policy.pt"), data, corpus, tmp_path, cfg, BCConfig(log_every=10))
@@ -206,6 +208,12 @@ def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):
     with pytest.raises(InputError, match="actuator_profile: episode physicalized under 'lessmimic_demo', the policy"):
         PolicyActor(load_policy(tmp_path / "policy.pt")).reset(env)
     assert rows[1]["aggregated_windows"] == rows[0]["aggregated_windows"] + new
+    assert torch.load(tmp_path / "dagger_optimizer.pt", weights_only=True)["iteration"] == 1
+    straight = tmp_path / "straight"
+    straight.mkdir()
+    dagger(load_policy(tmp_path / "policy_bc.pt"), data, corpus, straight, replace(cfg, iterations=2), BCConfig())
+    resumed, whole = (torch.load(d / "policy_dagger1.pt", weights_only=True)["backbone"] for d in (tmp_path, straight))
+    assert all(torch.equal(resumed[k], whole[k]) for k in whole)
 
 
 def test_dagger_draws_more_of_the_tasks_the_student_fails(corpus):
@@ -288,19 +296,29 @@ def _tensors(d, prefix=""):
             yield prefix + k, v
 
 
-def test_the_checkpoint_is_chosen_by_its_worst_task_relative_to_the_teacher(corpus, tmp_path):
-    """Validation rows (here written beforehand, as a resumed choice finds them): the last iteration is best on
-    average but lost SitStand, the middle one is best on its worst task; Carry, which the teacher rarely completes,
-    does not decide alone. The choice is logged and policy.pt becomes that checkpoint."""
+def test_the_policy_is_the_average_of_iterations_chosen_by_its_worst_task_relative_to_the_teacher(corpus, tmp_path):
+    """Candidates average consecutive iterations' weights. Validation rows (here written beforehand, as a resumed
+    choice finds them): the last candidate is best on average but lost SitStand, the middle one is best on its
+    worst task; Carry, which the teacher rarely completes, does not decide alone. The choice is logged and policy.pt
+    holds the mean of the chosen candidate's iterations."""
     from dataclasses import asdict
 
-    from train.evaluation.select import SelectConfig, choose, validation_episodes
+    from train.evaluation.select import SelectConfig, candidates, choose, validation_episodes
+    from train.policy import load_policy, save_policy
 
-    cfg = SelectConfig(episodes=1)
+    cfg = SelectConfig(episodes=1, average=2)
     features = stage_dir("train", "features")
     train_bc(features, tmp_path, BCConfig(steps=5, log_every=5), PolicyConfig(), VAEConfig(), vae_steps=5)
-    for i in range(3):
-        (tmp_path / f"policy_dagger{i}.pt").write_bytes((tmp_path / "policy.pt").read_bytes())
+    base = load_policy(tmp_path / "policy.pt").backbone.state_dict()
+    for i in range(3):  # iteration i: the BC weights + i
+        policy = load_policy(tmp_path / "policy.pt")
+        with torch.no_grad():
+            for w in policy.backbone.parameters():
+                w.add_(float(i))
+        save_policy(policy, tmp_path / f"policy_dagger{i}.pt")
+    labels = [label for label, _ in candidates(tmp_path, cfg.average)]
+    assert labels == ["policy_dagger0.pt", "mean of policy_dagger0.pt..policy_dagger1.pt",
+                      "mean of policy_dagger1.pt..policy_dagger2.pt"]  # fmt: skip
     teacher = {"PickUp": 1.0, "SitStand": 1.0, "Push": 1.0, "Carry": 0.25}
     scores = [
         {"PickUp": 0.2, "SitStand": 0.2, "Push": 0.5, "Carry": 0.0},
@@ -308,15 +326,18 @@ def test_the_checkpoint_is_chosen_by_its_worst_task_relative_to_the_teacher(corp
         {"PickUp": 0.9, "SitStand": 0.1, "Push": 0.9, "Carry": 0.25},  # best mean, worst: SitStand 0.1
     ]
     rows = [{"checkpoint": "teacher", "scores": teacher, "config": asdict(cfg)}]
-    for i, s in enumerate(scores):
+    for label, s in zip(labels, scores):
         ratio = [v / max(teacher[t], 0.05) for t, v in s.items()]
-        rows.append({"checkpoint": f"policy_dagger{i}.pt", "scores": s, "worst_ratio": min(ratio),
+        rows.append({"checkpoint": label, "scores": s, "worst_ratio": min(ratio),
                      "mean_ratio": float(np.mean(ratio)), "config": asdict(cfg)})  # fmt: skip
     (tmp_path / "validation.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     choice = choose(tmp_path, corpus[:1], corpus[1:], cfg)
-    assert choice["chosen"] == "policy_dagger1.pt" and choice["last"] == "policy_dagger2.pt"
-    assert torch.load(tmp_path / "policy.pt", weights_only=True)["chosen_from"] == "policy_dagger1.pt"
+    assert choice["chosen"] == labels[1] and choice["last"] == labels[2]
+    saved = torch.load(tmp_path / "policy.pt", weights_only=True)
+    assert saved["chosen_from"] == labels[1]
+    for k, w in saved["backbone"].items():  # the mean of iterations 0 and 1: the BC weights + 0.5
+        torch.testing.assert_close(w, base[k] + 0.5 if w.is_floating_point() else base[k], rtol=0, atol=1e-5)
     assert json.loads((tmp_path / "selection.json").read_text())["chosen_scores"] == scores[1]
     episodes, origin = validation_episodes(corpus[:1], corpus[1:])
-    assert origin[corpus[0].task] == "held out" and list(origin.values()).count("training") == len(corpus) - 1
+    assert origin[corpus[0].task].startswith("1 held out") and len(episodes) == len(corpus)
     assert sorted(e.task for e in episodes) == sorted(e.task for e in corpus)

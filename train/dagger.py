@@ -10,7 +10,9 @@ refitted. Read top to bottom:
    student alone (beta 0) runs :attr:`DAggerConfig.probe` fixed episodes (the same every iteration, tasks in
    turn), labelled and aggregated the same way: its figures say how the student itself does;
 2. the aggregated windows (all iterations so far) and the dataset's windows train the student for ``fit_steps``
-   (:func:`train.bc.fit`);
+   (:func:`train.bc.fit`), with one Adam optimiser for all refits: its moments carry over (``dagger_optimizer.pt``),
+   so a refit does not start with the fresh optimiser's first steps, which move every weight by about the peak
+   rate whatever its gradient's noise (bias-corrected ``m / sqrt(v)`` is ``sign(g)`` at step 1);
 3. a row of ``dagger_log.jsonl`` per iteration: beta, the on-policy student-teacher action error (RMS over
    joints, on the states the student visited), mean episode length, falls and task success of the mixture's
    rollouts and (``student``) of the student's own, windows aggregated, and the refit's losses.
@@ -41,7 +43,7 @@ from tqdm import tqdm
 
 from pipeline.stage.atomic import write_bytes_atomic
 from train.actors import PolicyActor, TeacherActor
-from train.bc import BCConfig, WindowTensors, fit
+from train.bc import BCConfig, WindowTensors, adam, fit
 from train.envs.cpu.env import EnvConfig, InteractionEnv
 from train.episodes import Episode
 from train.policy import InteractionPolicy, load_policy, save_policy
@@ -173,11 +175,16 @@ def dagger(
     ``run_dir/policy.pt``."""
     run_dir = Path(run_dir)
     log_path, data_path = run_dir / "dagger_log.jsonl", run_dir / "dagger_data.pt"
+    opt_path = run_dir / "dagger_optimizer.pt"
     done_rows = read_log(run_dir)
     aggregated = None
     if done_rows and data_path.is_file():  # resume after the last finished iteration
         aggregated = WindowTensors(**torch.load(data_path, weights_only=True))
         policy = load_policy(run_dir / f"policy_dagger{len(done_rows) - 1}.pt", device=_device(policy))
+    opt = adam(policy, bc)  # one optimiser for all refits: its moments carry over (module docstring)
+    saved = torch.load(opt_path, map_location=_device(policy), weights_only=True) if opt_path.is_file() else {}
+    if done_rows and saved.get("iteration") == len(done_rows) - 1:  # else a run from before it was kept: fresh
+        opt.load_state_dict(saved["state"])
     teacher = TeacherActor()
     probe = probe_episodes(episodes, config.probe, config.seed)
     tasks = sorted({e.task for e in episodes})
@@ -200,6 +207,7 @@ def dagger(
             WindowTensors.concat([dataset, aggregated]),
             replace(bc, steps=config.fit_steps, seed=bc.seed + it),
             heldout,
+            opt=opt,
         )
         row = {
             "iteration": it,
@@ -212,6 +220,9 @@ def dagger(
         }
         save_policy(policy, run_dir / f"policy_dagger{it}.pt")
         _save(aggregated, data_path)
+        buf = io.BytesIO()
+        torch.save({"iteration": it, "state": opt.state_dict()}, buf)
+        write_bytes_atomic(opt_path, buf.getvalue())
         with log_path.open("a", encoding="utf-8") as f:  # last: the row marks a finished iteration
             f.write(json.dumps(row) + "\n")
         done_rows.append(row)

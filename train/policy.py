@@ -263,3 +263,18 @@ def load_policy(
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:
         raise InputError(path, "backbone", f"unreadable policy weights ({type(exc).__name__})") from None
     return policy.to(device).eval()
+
+
+def mean_policy(paths: list[str | Path], device: str | torch.device = "cpu") -> InteractionPolicy:
+    """The policy whose backbone weights are the mean of those saved at ``paths`` (``theta = sum_j theta_j / n``,
+    :class:`torch.optim.swa_utils.AveragedModel`; the frozen VAE and the normalisers are the last one's); a one-line
+    :class:`InputError` if a checkpoint's layout or config differs from the last's."""
+    policies = [load_policy(p, device=device) for p in paths]
+    last = policies[-1]
+    mean = torch.optim.swa_utils.AveragedModel(last.backbone)
+    for path, policy in zip(paths, policies):
+        if policy.config != last.config or policy.layout != last.layout:
+            raise InputError(path, "layout", f"averaged with {paths[-1]}, whose policy layout or config differs")
+        mean.update_parameters(policy.backbone)
+    last.backbone.load_state_dict(mean.module.state_dict())
+    return last.eval()

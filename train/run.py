@@ -4,8 +4,9 @@
    ``vae.pt``, ``bc_log.jsonl``, ``bc_report.json``, ``policy_bc.pt``;
 2. DAgger from the QP teacher in the interaction environment (:func:`train.dagger.dagger`):
    ``dagger_log.jsonl``, ``policy_dagger<i>.pt``, ``dagger_data.pt``;
-3. ``policy.pt``: the run's policy, the DAgger iteration whose student does best on its worst task in validation
-   rollouts (:mod:`train.evaluation.select`: ``validation.jsonl``, ``selection.json``), and ``report.json``
+3. ``policy.pt``: the run's policy, the mean of three consecutive DAgger iterations' weights whose student does best
+   on its worst task in validation rollouts (:mod:`train.evaluation.select`: ``validation.jsonl``,
+   ``selection.json``), and ``report.json``
    (written last) with the run's scale: corpus episodes and frames, BC steps and samples, DAgger iterations and
    windows, the chosen checkpoint, seconds.
 
