@@ -147,7 +147,8 @@ def add_train(sub) -> None:
         "--select-episodes",
         type=int,
         default=d.select_episodes,
-        help="validation rollouts per task and candidate that choose policy.pt (0: the last iteration's)",
+        help="validation rollouts per task and candidate that choose policy.pt (default 0: the last candidate, "
+        "the mean of the last three iterations' weights)",
     )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")

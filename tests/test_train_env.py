@@ -338,6 +338,9 @@ def test_the_policy_is_the_average_of_iterations_chosen_by_its_worst_task_relati
     for k, w in saved["backbone"].items():  # the mean of iterations 0 and 1: the BC weights + 0.5
         torch.testing.assert_close(w, base[k] + 0.5 if w.is_floating_point() else base[k], rtol=0, atol=1e-5)
     assert json.loads((tmp_path / "selection.json").read_text())["chosen_scores"] == scores[1]
+    last = choose(tmp_path, corpus[:1], corpus[1:], SelectConfig(episodes=0, average=2))  # the default: no rollouts
+    assert last["chosen"] == labels[2] and "chosen_scores" not in last
+    assert torch.load(tmp_path / "policy.pt", weights_only=True)["chosen_from"] == labels[2]
     episodes, origin = validation_episodes(corpus[:1], corpus[1:])
     assert origin[corpus[0].task].startswith("1 held out") and len(episodes) == len(corpus)
     assert sorted(e.task for e in episodes) == sorted(e.task for e in corpus)

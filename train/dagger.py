@@ -12,7 +12,11 @@ refitted. Read top to bottom:
 2. the aggregated windows (all iterations so far) and the dataset's windows train the student for ``fit_steps``
    (:func:`train.bc.fit`), with one Adam optimiser for all refits: its moments carry over (``dagger_optimizer.pt``),
    so a refit does not start with the fresh optimiser's first steps, which move every weight by about the peak
-   rate whatever its gradient's noise (bias-corrected ``m / sqrt(v)`` is ``sign(g)`` at step 1);
+   rate whatever its gradient's noise (bias-corrected ``m / sqrt(v)`` is ``sign(g)`` at step 1). Measured (issue 40,
+   training seeds 0 / 1 / 2, the mean of the last three iterations' weights, 48 evaluation episodes a cell at 1.0):
+   PickUp 89.6 / 72.9 / 58.3, SitStand 79.2 / 97.9 / 79.2, Push contact 89.2 / 89.4 / 63.8, Carry 8.3 / 10.4 /
+   4.2% with the moments kept, against 48 / 50 / 81, 54 / 54 / 69, 97 / 74 / 73, 13 / 15 / 8% with a fresh
+   optimiser per refit (SitStand's worst seed 79 against 54); on-policy action error and refit losses alike;
 3. a row of ``dagger_log.jsonl`` per iteration: beta, the on-policy student-teacher action error (RMS over
    joints, on the states the student visited), mean episode length, falls and task success of the mixture's
    rollouts and (``student``) of the student's own, windows aggregated, and the refit's losses.

@@ -4,9 +4,9 @@
    ``vae.pt``, ``bc_log.jsonl``, ``bc_report.json``, ``policy_bc.pt``;
 2. DAgger from the QP teacher in the interaction environment (:func:`train.dagger.dagger`):
    ``dagger_log.jsonl``, ``policy_dagger<i>.pt``, ``dagger_data.pt``;
-3. ``policy.pt``: the run's policy, the mean of three consecutive DAgger iterations' weights whose student does best
-   on its worst task in validation rollouts (:mod:`train.evaluation.select`: ``validation.jsonl``,
-   ``selection.json``), and ``report.json``
+3. ``policy.pt``: the run's policy, the mean of the last three DAgger iterations' weights, or of the three whose
+   student does best on its worst task in validation rollouts (``select_episodes`` > 0;
+   :mod:`train.evaluation.select`: ``validation.jsonl``, ``selection.json``), and ``report.json``
    (written last) with the run's scale: corpus episodes and frames, BC steps and samples, DAgger iterations and
    windows, the chosen checkpoint, seconds.
 
@@ -50,7 +50,7 @@ class TrainConfig:
     dagger_probe: int = 8
     dagger_fit_steps: int = 1500
     envs: int = 8
-    select_episodes: int = 12  # validation rollouts per task and checkpoint (train.evaluation.select); 0: the last
+    select_episodes: int = 0  # validation rollouts per candidate and task (train.evaluation.select); 0: the last one
     seed: int = 0
     device: str = "cpu"
 
@@ -108,10 +108,8 @@ def train(config: TrainConfig, run_dir: str | Path, *, overwrite: bool = False) 
 
     train_valid = valid(train_eps)
     dagger(policy, data, train_valid, run_dir, dagger_config, bc, heldout)
-    chosen = f"policy_dagger{config.dagger_iterations - 1}.pt"
-    if config.select_episodes > 0:
-        select = SelectConfig(episodes=config.select_episodes, envs=config.envs)
-        chosen = choose(run_dir, valid(held), train_valid, select)["chosen"]
+    select = SelectConfig(episodes=config.select_episodes, envs=config.envs)
+    chosen = choose(run_dir, valid(held), train_valid, select)["chosen"]
     rows = read_log(run_dir)
     last = rows[-1] if rows else {}
     bc_seconds = json.loads((run_dir / "bc_report.json").read_text()).get("seconds", 0.0)
