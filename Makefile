@@ -91,9 +91,10 @@ corpus: install
 	$(CLI) features $(CORPUS_ARGS)
 
 # Train I (paper Sec. III-B): the DF VAE, behaviour cloning on the corpus, DAgger from the QP teacher, into runs/$(RUN)/.
-# Laptop scale by default (2 CPU cores, ~60 min on the 100-clip corpus: VAE + BC ~8 min, 20 DAgger iterations ~2.3 min
+# Laptop scale by default (2 CPU cores, ~55 min on the 100-clip corpus: VAE + BC ~8 min, 20 DAgger iterations ~2.3 min
 # each, then policy.pt: the mean of the last three iterations' weights; TRAIN_ARGS="--select-episodes 12" chooses
-# the three by validation rollouts instead, ~5 min: train/evaluation/select.py); resumable, and TRAIN_ARGS="--dagger-iterations 40" continues a finished run; TRAIN_ARGS for more, e.g.
+# the three by validation rollouts instead, ~5 min more: train/evaluation/select.py); resumable, and
+# TRAIN_ARGS="--dagger-iterations 40" continues a finished run; TRAIN_ARGS for more, e.g.
 # TRAIN_ARGS="--bc-steps 200000 --device cuda". `make eval` scores the run's policy and the QP teacher baseline
 # (Table 2 cells, 3 evaluation seeds x 16 episodes per cell, each with its 95% interval) into runs/$(RUN)/eval/.
 RUN ?= bc

@@ -66,6 +66,7 @@ from pipeline.robot import (
     ROOT_QUAT,
 )
 from pipeline.rotations import quat_mat
+from pipeline.stage.atomic import write_torch_atomic
 from pipeline.terms.fall import fallen
 from pipeline.terms.layout import SUBSTEPS
 from pipeline.terms.observations import rot6
@@ -349,10 +350,7 @@ def train_residual(
     finally:
         torch.set_num_threads(threads)
     out = Path(out_path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    torch.save(ckpt, tmp)
-    tmp.replace(out)
+    write_torch_atomic(out, ckpt)
     return out
 
 

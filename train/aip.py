@@ -24,7 +24,6 @@ Ablations (:mod:`train.ablation`): ``-AIP`` drops the interaction prior, ``-Rand
 
 from __future__ import annotations
 
-import io
 import json
 import time
 from dataclasses import asdict, dataclass, field, replace
@@ -40,7 +39,7 @@ from tqdm import tqdm
 
 from pipeline.dataset.read import episode_ranges, read_columns
 from pipeline.errors import InputError
-from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
+from pipeline.stage.atomic import write_json_atomic, write_torch_atomic
 from pipeline.stage.paths import stage_dir
 from pipeline.terms.layout import AMP_STATE, DF, PROPRIO
 from train.ablation import POST_TRAINING
@@ -194,15 +193,13 @@ def reference_buffers(name: str, vae: DFVAE) -> dict[str, torch.Tensor]:
 
 
 def _save_state(alg: AdversarialPPO, iteration: int, path: Path) -> None:
-    buf = io.BytesIO()
     state = alg.save() | {
         "iteration": iteration,
         "priors": {k: d.state_dict() for k, (d, _) in alg.priors.items()},
         "prior_optimizers": {k: o.state_dict() for k, o in alg.disc_optim.items()},
         "torch_rng": torch.get_rng_state(),
     }
-    torch.save(state, buf)
-    write_bytes_atomic(path, buf.getvalue())
+    write_torch_atomic(path, state)
 
 
 def build(name: str, policy_path: str | Path, config: PostTrainConfig, device: str = "cpu",

@@ -35,7 +35,6 @@ folder: a rerun resumes after the last finished iteration. Deterministic for a s
 
 from __future__ import annotations
 
-import io
 import json
 import time
 from dataclasses import asdict, dataclass, replace
@@ -45,7 +44,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from pipeline.stage.atomic import write_bytes_atomic
+from pipeline.stage.atomic import write_torch_atomic
 from train.actors import PolicyActor, TeacherActor
 from train.bc import BCConfig, WindowTensors, adam, fit
 from train.envs.cpu.env import EnvConfig, InteractionEnv
@@ -155,9 +154,7 @@ def _device(policy: InteractionPolicy) -> torch.device:
 
 
 def _save(data: WindowTensors, path: Path) -> None:
-    buf = io.BytesIO()
-    torch.save({k: getattr(data, k) for k in ("proprio", "root_command", "df", "rows", "action")}, buf)
-    write_bytes_atomic(path, buf.getvalue())
+    write_torch_atomic(path, {k: getattr(data, k) for k in ("proprio", "root_command", "df", "rows", "action")})
 
 
 def read_log(run_dir: str | Path) -> list[dict]:
@@ -224,9 +221,7 @@ def dagger(
         }
         save_policy(policy, run_dir / f"policy_dagger{it}.pt")
         _save(aggregated, data_path)
-        buf = io.BytesIO()
-        torch.save({"iteration": it, "state": opt.state_dict()}, buf)
-        write_bytes_atomic(opt_path, buf.getvalue())
+        write_torch_atomic(opt_path, {"iteration": it, "state": opt.state_dict()})
         with log_path.open("a", encoding="utf-8") as f:  # last: the row marks a finished iteration
             f.write(json.dumps(row) + "\n")
         done_rows.append(row)

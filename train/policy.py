@@ -21,7 +21,6 @@ the policy reads and drives (links, dims, actuator profile, history); loading ch
 
 from __future__ import annotations
 
-import io
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -32,7 +31,7 @@ from torch import nn
 from pipeline.dataset.read import dataset_actuator_profile
 from pipeline.errors import InputError
 from pipeline.robot import DEFAULT_PROFILE
-from pipeline.stage.atomic import write_bytes_atomic
+from pipeline.stage.atomic import write_torch_atomic
 from pipeline.terms import layout as L
 from train.normalize import MIN_STD, Normalizer
 from train.vae import DFVAE, df_links, mlp, require_columns
@@ -231,9 +230,7 @@ def make_policy(
 
 def save_policy(policy: InteractionPolicy, path: str | Path, **extra) -> Path:
     """The checkpoint dict (plus ``extra`` JSON-able entries, e.g. a training report) written atomically."""
-    buf = io.BytesIO()
-    torch.save({**policy.to_checkpoint(), **extra}, buf)
-    write_bytes_atomic(Path(path), buf.getvalue())
+    write_torch_atomic(Path(path), {**policy.to_checkpoint(), **extra})
     return Path(path)
 
 

@@ -15,7 +15,6 @@ latents ``{z_(t-l+1) .. z_t}`` (:mod:`train.policy`); the VAE is trained first a
 
 from __future__ import annotations
 
-import io
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -27,7 +26,7 @@ from torch import nn
 
 from pipeline.dataset.read import episode_ranges, read_columns, read_info
 from pipeline.errors import InputError
-from pipeline.stage.atomic import write_bytes_atomic
+from pipeline.stage.atomic import write_torch_atomic
 from pipeline.terms.layout import DF, DF_PARTS
 from train.normalize import Normalizer
 
@@ -164,9 +163,7 @@ class DFVAE(nn.Module):
 
 def save_vae(vae: DFVAE, path: str | Path) -> Path:
     """``torch.save`` of :meth:`DFVAE.to_checkpoint`, written atomically."""
-    buf = io.BytesIO()
-    torch.save(vae.to_checkpoint(), buf)
-    write_bytes_atomic(Path(path), buf.getvalue())
+    write_torch_atomic(Path(path), vae.to_checkpoint())
     return Path(path)
 
 

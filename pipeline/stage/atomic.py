@@ -29,3 +29,14 @@ def write_json_atomic(path: Path, data: dict) -> None:
 
 def write_pickle_atomic(path: Path, obj: object) -> None:
     write_bytes_atomic(path, pickle.dumps(obj))
+
+
+def write_torch_atomic(path: Path, obj: object) -> None:
+    """``torch.save(obj)`` into ``path``, whole or not at all."""
+    import io
+
+    import torch
+
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    write_bytes_atomic(path, buf.getvalue())
