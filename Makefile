@@ -18,7 +18,7 @@ RUN_ARGS = -j $(JOBS) --executor $(EXECUTOR)
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install lint format retarget import physicalize train-residual features corpus train-bc train-aip eval test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-train bench-train-mjlab bench-features clean-venv
+.PHONY: install lint format retarget import physicalize train-residual features corpus train-bc train-aip eval test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-train bench-train-mjlab bench-features bench-export export clean-venv
 
 install: $(VENV)/.installed
 
@@ -118,10 +118,16 @@ train-aip: install
 	$(CLI) train-aip --name $(CORPUS) --run runs/$(RUN) --backend $(BACKEND) $(if $(ABLATION),--ablation=$(ABLATION)) $(AIP_ARGS)
 
 # EVAL_ARGS="--chains 5,10" adds the long-horizon chains (Table 3) of the policy; "--episodes 8" more per cell.
+# POLICY=runs/$(RUN)/policy.onnx evaluates the exported file through onnxruntime in the same harness.
 POLICY ?= runs/$(RUN)/policy.pt
 EVAL_ARGS ?=
 eval: install
 	$(CLI) eval --name $(CORPUS) --policy $(POLICY) --teacher $(EVAL_ARGS)
+
+# The policy as ONNX with its metadata (train/export/): runs/$(RUN)/policy.onnx beside POLICY; EXPORT_ARGS="--overwrite".
+EXPORT_ARGS ?=
+export: install
+	$(CLI) export --policy $(POLICY) $(EXPORT_ARGS)
 
 # ruff (pinned in the dev extras, configured in pyproject.toml): `make format` rewrites, `make lint` checks.
 lint: install
@@ -164,6 +170,11 @@ bench-train-mjlab: install
 
 bench-features: install
 	$(PY) bench/bench_features.py
+
+# ONNX export beside its torch checkpoint (bench/bench_export.py): export seconds, parity on recorded observations,
+# latency of one call; POLICY a trained policy.pt.
+bench-export: install
+	$(PY) bench/bench_export.py --policy $(POLICY) --name $(CORPUS)
 
 clean-venv:
 	rm -rf $(VENV)

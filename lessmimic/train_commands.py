@@ -13,7 +13,8 @@ def _cmd_train_bc(a: argparse.Namespace) -> int:
     import torch
 
     from train.ablation import ablated
-    from train.run import TrainConfig, train
+    from train.config import TrainConfig
+    from train.run import train
 
     torch.set_num_threads(a.threads)
     ab = ablated(a.name, a.run, a.ablation, "pre", a.backbone)
@@ -43,6 +44,23 @@ def _cmd_train_bc(a: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_export(a: argparse.Namespace) -> int:
+    import torch
+
+    from train.export.onnx_policy import export_onnx
+
+    torch.set_num_threads(a.threads)
+    r = export_onnx(a.policy, a.out, overwrite=a.overwrite)
+    print(
+        f"exported {a.policy} -> {r.path} ({r.bytes / 1e6:.2f} MB) in {r.seconds:.1f} s; onnxruntime vs torch "
+        f"{r.check_max_abs:.1e} rad at most on {CHECK_NOTE}"
+    )
+    return 0
+
+
+CHECK_NOTE = "64 observations drawn around the normalisers' statistics"
+
+
 def _cmd_eval(a: argparse.Namespace) -> int:
     import torch
 
@@ -58,7 +76,13 @@ def _cmd_eval(a: argparse.Namespace) -> int:
     results = []
     if a.policy:
         layout = dataset_layout(stage_dir(a.name, "features"))  # the corpus's links and actuator profile
-        policy = load_policy(a.policy, {"links": layout.links, "actuator_profile": layout.actuator_profile})
+        expect = {"links": layout.links, "actuator_profile": layout.actuator_profile}
+        if Path(a.policy).suffix == ".onnx":  # an exported file, run by onnxruntime in the same harness
+            from train.export.runtime import OnnxPolicy
+
+            policy = OnnxPolicy(a.policy, expect)
+        else:
+            policy = load_policy(a.policy, expect)
         results.append(evaluate(PolicyActor(policy), episodes, cfg, f"policy ({Path(a.policy).parent.name})"))
     if a.teacher:
         results.append(evaluate(TeacherActor(), episodes, cfg, "QP teacher, 1.0x reference"))
@@ -89,9 +113,10 @@ def _cmd_train_aip(a: argparse.Namespace) -> int:
     torch.set_num_threads(a.threads)
     ab = ablated(a.name, a.run, a.ablation, "post")
     mjlab = a.backend == "mjlab"
+    d = PostTrainConfig()
     cfg = PostTrainConfig(
-        iterations=a.iterations,
-        steps_per_env=a.steps_per_env,
+        iterations=d.iterations if a.iterations is None else a.iterations,
+        steps_per_env=d.steps_per_env if a.steps_per_env is None else a.steps_per_env,
         env=PostEnvConfig(envs=a.envs or (4096 if mjlab else PostEnvConfig().envs), threads=a.env_threads),
         ablation=ab.post,
         seed=a.seed,
@@ -131,7 +156,7 @@ def add_train(sub) -> None:
         default="",
         help="-Syn (on datasets/<NAME>-syn/, into <RUN>-Syn) or -Trans (MLP, into <RUN>-Trans): train.ablation",
     )
-    from train.run import TrainConfig  # the defaults: the laptop scale
+    from train.config import TrainConfig  # the defaults: the laptop scale
 
     d = TrainConfig()
     p.add_argument("--vae-steps", type=int, default=d.vae_steps)
@@ -158,9 +183,6 @@ def add_train(sub) -> None:
         "train-aip",
         help="post-train a run's BC + DAgger policy: PPO with the AIP and AMP style priors (runs/<RUN>/aip<ABLATION>/)",
     )
-    from train.aip import PostTrainConfig
-
-    d = PostTrainConfig()
     p.add_argument("--name", default="corpus", help="the corpus (its valid episodes and its reference buffers)")
     p.add_argument("--run", default="runs/bc", help="the BC + DAgger run folder (its policy.pt); a rerun resumes")
     p.add_argument(
@@ -169,17 +191,28 @@ def add_train(sub) -> None:
         help="-AIP (no interaction prior), -Rand (no randomisation), or -Syn / -Trans (post-train <RUN>-Syn / "
         "<RUN>-Trans, -Syn on datasets/<NAME>-syn/): train.ablation",
     )
-    p.add_argument("--iterations", type=int, default=d.iterations, help="PPO iterations")
-    p.add_argument("--steps-per-env", type=int, default=d.steps_per_env, help="rollout steps per env and iteration")
-    p.add_argument("--envs", type=int, default=None, help=f"environments stepped together ({d.env.envs}; mjlab 4096)")
+    # defaults from train.aip.PostTrainConfig when the command runs (importing it here costs every command ~5 s)
+    p.add_argument("--iterations", type=int, default=None, help="PPO iterations (default: the laptop scale, 600)")
+    p.add_argument("--steps-per-env", type=int, default=None, help="rollout steps per env and iteration (default 24)")
+    p.add_argument("--envs", type=int, default=None, help="environments stepped together (default: cpu 8, mjlab 4096)")
     p.add_argument("--env-threads", type=int, default=1, help="threads stepping the environments")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--backend", default="cpu", help="cpu (native MuJoCo) or mjlab (MuJoCo Warp on a GPU)")
     p.add_argument("--device", default=None, help="torch device (cpu; cuda for --backend mjlab)")
     p.add_argument("--threads", type=int, default=1, help="torch threads")
     p.set_defaults(func=_cmd_train_aip)
+    p = sub.add_parser(
+        "export", help="a trained policy (runs/<RUN>/policy.pt, any interaction policy) as ONNX with its metadata"
+    )
+    p.add_argument("--policy", required=True, help="the checkpoint (runs/<RUN>/policy.pt, runs/<RUN>/aip/policy.pt)")
+    p.add_argument("--out", default=None, help="the ONNX file (default: beside the checkpoint, .onnx)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing export")
+    p.add_argument("--threads", type=int, default=1)
+    p.set_defaults(func=_cmd_export)
     p = sub.add_parser("eval", help="the paper's Table 2 evaluation of a policy and/or the QP teacher baseline")
-    p.add_argument("--policy", default=None, help="a policy checkpoint (runs/<RUN>/policy.pt)")
+    p.add_argument(
+        "--policy", default=None, help="a policy checkpoint (runs/<RUN>/policy.pt) or its ONNX export (.onnx)"
+    )
     p.add_argument("--teacher", action="store_true", help="also score the QP teacher tracking the 1.0x reference")
     p.add_argument("--name", default="corpus", help="the corpus whose episodes are evaluated (default corpus)")
     p.add_argument("--seeds", default="0,1,2", help="evaluation seeds (default 0,1,2)")

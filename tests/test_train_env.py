@@ -245,7 +245,8 @@ def test_train_and_eval_commands_refuse_bad_input_with_one_line(corpus, tmp_path
 
 
 def test_a_run_folder_takes_more_dagger_iterations_and_refuses_other_settings(tmp_path):
-    from train.run import TrainConfig, _claim
+    from train.config import TrainConfig
+    from train.run import _claim
 
     run = tmp_path / "run"
     _claim(run, TrainConfig(dagger_iterations=2), overwrite=False)
@@ -264,7 +265,7 @@ def test_a_run_folder_takes_more_dagger_iterations_and_refuses_other_settings(tm
 
 
 def _smoke(seed: int):
-    from train.run import TrainConfig
+    from train.config import TrainConfig
 
     return TrainConfig(name="train", vae_steps=20, bc_steps=20, batch=32, dagger_iterations=2, dagger_episodes=2,
                        dagger_probe=1, dagger_fit_steps=10, envs=2, select_episodes=1, seed=seed)  # fmt: skip

@@ -20,39 +20,19 @@ from __future__ import annotations
 
 import json
 import shutil
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 from pipeline.errors import InputError
 from pipeline.stage.atomic import write_json_atomic
 from pipeline.stage.paths import stage_dir
-from pipeline.terms.layout import HISTORY
 from train.bc import BCConfig, WindowTensors, train_bc
+from train.config import TrainConfig
 from train.dagger import DAggerConfig, dagger, read_log
 from train.episodes import load_episodes
 from train.evaluation.select import SelectConfig, choose
 from train.policy import PolicyConfig, load_policy, save_policy
 from train.vae import VAEConfig, split_episodes
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """A run's settings. The defaults are the laptop scale (~55 min on 2 CPU cores on the 100-clip corpus)."""
-
-    name: str = "corpus"  # the corpus: datasets/<name>/{features,physicalized,retargeted}
-    backbone: str = "transformer"
-    history: int = HISTORY
-    vae_steps: int = 2000
-    bc_steps: int = 8000
-    batch: int = 256
-    dagger_iterations: int = 20
-    dagger_episodes: int = 32
-    dagger_probe: int = 8
-    dagger_fit_steps: int = 1500
-    envs: int = 8
-    select_episodes: int = 0  # validation rollouts per candidate and task (train.evaluation.select); 0: the last one
-    seed: int = 0
-    device: str = "cpu"
 
 
 def _claim(run_dir: Path, config: TrainConfig, overwrite: bool) -> None:

@@ -1,0 +1,110 @@
+"""ONNX export (train.export): parity with torch on recorded observations, the metadata contract, the exported file
+in the evaluation harness, and each bad input as a one-line error that leaves nothing behind."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import onnx
+import pytest
+import torch
+from mocap_paths import expect_input_error
+
+from pipeline.robot import G1_JOINT_NAMES, actuator_profile
+from pipeline.terms import layout as L
+from train.actors import PolicyActor
+from train.evaluation.table2 import EvalConfig, evaluate
+from train.export.metadata import METADATA_KEY, sha256
+from train.export.onnx_policy import export_onnx
+from train.export.parity import parity, recorded_windows
+from train.export.runtime import OnnxPolicy, read_metadata
+from train.policy import load_policy
+
+
+@pytest.fixture(scope="module")
+def exported(bc_corpus, tmp_path_factory):
+    """``(episodes, checkpoint, onnx path)``: the tiny BC policy of ``bc_corpus`` exported once."""
+    episodes, checkpoint = bc_corpus
+    out = tmp_path_factory.mktemp("export") / "policy.onnx"
+    report = export_onnx(checkpoint, out)
+    assert report.path == out and out.stat().st_size == report.bytes and report.check_max_abs <= 1e-5
+    return episodes, checkpoint, out
+
+
+def test_onnx_acts_as_torch_on_recorded_observations(exported):
+    episodes, checkpoint, out = exported
+    policy = load_policy(checkpoint)
+    windows = recorded_windows(policy, episodes[:2], steps=40)
+    assert windows[0].shape[1:] == (policy.layout.history, L.PROPRIO_DIM) and len(windows[0]) >= 40
+    assert np.ptp(windows[0][:, -1, :29], axis=0).max() > 1e-3  # the robot moved: not one observation repeated
+    result = parity(policy, out, windows)
+    assert result["windows"] == len(windows[0]) and result["max_abs"] <= 1e-5, result
+    one = OnnxPolicy(out).act(*(torch.from_numpy(w[:1]) for w in windows))  # batch 1: the axis is dynamic
+    assert one.shape == (1, L.ACTION_DIM)
+
+
+def test_the_metadata_says_how_to_run_the_file(exported):
+    _, checkpoint, out = exported
+    meta = read_metadata(out)
+    policy = load_policy(checkpoint)
+    profile = actuator_profile(policy.layout.actuator_profile)
+    assert meta["joint_names"] == list(G1_JOINT_NAMES) and meta["checkpoint"]["sha256"] == sha256(checkpoint)
+    assert np.allclose(meta["actuator"]["kp"], profile.kp) and np.allclose(meta["actuator"]["kd"], profile.kd)
+    assert np.allclose(meta["actuator"]["default_joint_pos"], profile.default_joint_pos)
+    assert meta["control"] == {"fps": 50, "dt_s": 0.02, "physics_timestep_s": 0.005, "substeps": 4}
+    inputs = meta["observation"]["inputs"]
+    assert inputs["proprio"]["names"] == list(L.PROPRIO_NAMES) and inputs["df"]["shape"][-1] == policy.layout.df_dim
+    assert meta["policy"]["layout"] == policy.layout.to_dict()
+    model = onnx.load(str(out))
+    graph_inputs = {
+        i.name: [d.dim_param or d.dim_value for d in i.type.tensor_type.shape.dim] for i in model.graph.input
+    }
+    hist = policy.layout.history
+    assert graph_inputs == {
+        "proprio": ["batch", hist, 93],
+        "root_command": ["batch", hist, 12],
+        "df": ["batch", hist, policy.layout.df_dim],
+    }
+    assert [o.name for o in model.graph.output] == ["joint_targets"]
+    props = {p.key: p.value for p in model.metadata_props}
+    assert json.loads(props[METADATA_KEY]) == meta  # one JSON contract, and mjlab's flat keys beside it
+    assert props["joint_names"].split(",") == list(G1_JOINT_NAMES)
+    assert np.allclose([float(v) for v in props["joint_stiffness"].split(",")], profile.kp, rtol=0, atol=0)
+    assert "action_scale" not in props  # absolute targets: mjlab's default + scale * a would add the pose twice
+
+
+def test_the_exported_file_runs_in_the_evaluation_harness(exported):
+    episodes, _, out = exported
+    cfg = EvalConfig(seeds=(0,), episodes=1, envs=1, tasks=("PickUp",), scales=(1.0,))
+    cell = evaluate(PolicyActor(OnnxPolicy(out)), episodes, cfg, "onnx")["cells"]["PickUp@1"]
+    assert cell["episodes"] == 1 and 0.0 <= cell["mean"] <= 1.0
+
+
+def test_bad_inputs_are_one_line_errors_and_leave_nothing(exported, tmp_path):
+    _, checkpoint, out = exported
+    ckpt = torch.load(checkpoint, weights_only=True)
+    torch.save({"weights": torch.zeros(3)}, tmp_path / "other.pt")
+    expect_input_error(lambda: export_onnx(tmp_path / "other.pt"), tmp_path, file=tmp_path / "other.pt", field="format")
+
+    name = next(iter(ckpt["backbone"]))
+    bad = {**ckpt, "backbone": {**ckpt["backbone"], name: ckpt["backbone"][name].clone().fill_(float("nan"))}}
+    torch.save(bad, tmp_path / "nan.pt")
+    expect_input_error(
+        lambda: export_onnx(tmp_path / "nan.pt"), tmp_path, file=tmp_path / "nan.pt", field=f"backbone.{name}"
+    )
+
+    (tmp_path / "policy.onnx").write_bytes(b"an earlier export")
+    torch.save(ckpt, tmp_path / "policy.pt")
+    expect_input_error(
+        lambda: export_onnx(tmp_path / "policy.pt"), tmp_path, file=tmp_path / "policy.onnx", field="output"
+    )
+    assert export_onnx(tmp_path / "policy.pt", overwrite=True).bytes == (tmp_path / "policy.onnx").stat().st_size
+
+    plain = tmp_path / "plain.onnx"
+    model = onnx.load(str(out))
+    del model.metadata_props[:]
+    onnx.save(model, str(plain))
+    expect_input_error(lambda: OnnxPolicy(plain), tmp_path, file=plain, field=f"metadata_props.{METADATA_KEY}")
+    want = {"actuator_profile": "lessmimic_demo"}
+    expect_input_error(lambda: OnnxPolicy(out, want), out.parent, file=out, field="layout.actuator_profile")

@@ -1,0 +1,70 @@
+"""An exported policy run by onnxruntime (:class:`OnnxPolicy`), with the interface the evaluation's
+:class:`train.actors.PolicyActor` reads from a torch policy (``layout``, ``config.history``, ``eval()``,
+``act(proprio, root_command, df)``), so ``lessmimic eval --policy file.onnx`` runs the file in the same harness.
+
+onnxruntime runs on the CPU with one thread per session (the evaluation steps many environments per call; more
+threads only contend with the physics on a small machine).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from pipeline.errors import InputError
+from train.export.metadata import EXPORT_FORMAT, INPUTS, METADATA_KEY, OUTPUT
+from train.policy import PolicyConfig, PolicyLayout
+
+
+def read_metadata(path: str | Path) -> dict:
+    """The :data:`~train.export.metadata.METADATA_KEY` dict of an exported file, or a one-line :class:`InputError`."""
+    import onnx
+
+    try:
+        model = onnx.load(str(path), load_external_data=False)
+    except Exception as exc:  # noqa: BLE001 - any unreadable file is a one-line input error
+        raise InputError(path, "format", f"not an ONNX model ({type(exc).__name__})") from None
+    props = {p.key: p.value for p in model.metadata_props}
+    try:
+        meta = json.loads(props[METADATA_KEY])
+    except (KeyError, ValueError):
+        raise InputError(
+            path, f"metadata_props.{METADATA_KEY}", "missing: not exported by `lessmimic export`"
+        ) from None
+    if meta.get("format") != EXPORT_FORMAT:
+        raise InputError(path, "format", f"metadata format {meta.get('format')!r}, expected {EXPORT_FORMAT!r}")
+    return meta
+
+
+class OnnxPolicy:
+    """The exported policy at ``path``: ``act`` takes and returns what :meth:`InteractionPolicy.act` does."""
+
+    def __init__(self, path: str | Path, expect_layout: PolicyLayout | Mapping | None = None):
+        import onnxruntime as ort
+
+        self.path = Path(path)
+        self.metadata = read_metadata(path)
+        self.layout = PolicyLayout.from_dict(self.metadata["policy"]["layout"])
+        self.config = PolicyConfig.from_dict(self.metadata["policy"]["config"])
+        if expect_layout is not None and (bad := self.layout.mismatch(expect_layout)) is not None:
+            raise InputError(path, *bad)
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = options.inter_op_num_threads = 1
+        self.session = ort.InferenceSession(str(path), options, ["CPUExecutionProvider"])
+        names = tuple(i.name for i in self.session.get_inputs())
+        if names != INPUTS:
+            raise InputError(path, "inputs", f"graph inputs {names}, expected {INPUTS}")
+
+    def eval(self) -> OnnxPolicy:
+        return self
+
+    def act(self, proprio: torch.Tensor, root_command: torch.Tensor, df: torch.Tensor) -> torch.Tensor:
+        feed = {
+            k: np.ascontiguousarray(x.detach().cpu().numpy(), np.float32)
+            for k, x in zip(INPUTS, (proprio, root_command, df))
+        }
+        return torch.from_numpy(self.session.run([OUTPUT], feed)[0])
