@@ -99,8 +99,12 @@ corpus: install
 # (Table 2 cells, 3 evaluation seeds x 16 episodes per cell, each with its 95% interval) into runs/$(RUN)/eval/.
 RUN ?= bc
 TRAIN_ARGS ?=
+# CONTRACT=lessmimic_demo trains on the released web demo's observation (for `make export FORMAT=lessmimic-demo`),
+# on a corpus physicalized under its gains: `make corpus CORPUS=demo PROFILE=lessmimic_demo`, then
+# `make train-bc CORPUS=demo RUN=demo CONTRACT=lessmimic_demo`.
+CONTRACT ?= lessmimic
 train-bc: install
-	$(CLI) train-bc --name $(CORPUS) --run runs/$(RUN) $(if $(ABLATION),--ablation=$(ABLATION)) $(if $(OVERWRITE),--overwrite) $(TRAIN_ARGS)
+	$(CLI) train-bc --name $(CORPUS) --run runs/$(RUN) --contract $(CONTRACT) $(if $(ABLATION),--ablation=$(ABLATION)) $(if $(OVERWRITE),--overwrite) $(TRAIN_ARGS)
 
 # Train II (paper Sec. III-C): PPO from runs/$(RUN)/policy.pt with the AIP and AMP style priors, objects scaled per
 # axis in 0.4-1.6, into runs/$(RUN)/aip/: 600 iterations x 8 envs x 24 steps = 115k env steps, ~10 min on one core, a
@@ -125,9 +129,11 @@ eval: install
 	$(CLI) eval --name $(CORPUS) --policy $(POLICY) --teacher $(EVAL_ARGS)
 
 # The policy as ONNX with its metadata (train/export/): runs/$(RUN)/policy.onnx beside POLICY; EXPORT_ARGS="--overwrite".
+# FORMAT=lessmimic-demo: the released web demo's three files in runs/$(RUN)/lessmimic_demo/ (a CONTRACT=lessmimic_demo run).
+FORMAT ?= onnx
 EXPORT_ARGS ?=
 export: install
-	$(CLI) export --policy $(POLICY) $(EXPORT_ARGS)
+	$(CLI) export --policy $(POLICY) --format $(FORMAT) $(EXPORT_ARGS)
 
 # ruff (pinned in the dev extras, configured in pyproject.toml): `make format` rewrites, `make lint` checks.
 lint: install

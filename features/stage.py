@@ -65,7 +65,8 @@ CARD_NOTES = [
     f"`{{'{DF}': {_WINDOW}}}` for l = {HISTORY} at {CONTROL_FPS} fps (frames before the episode start are "
     f"padded and flagged `*_is_pad`), or with `pipeline.dataset.WindowDataset(root, keys, history={HISTORY})`.",
     f"`{DF_DEMO}` is the input contract of the released LessMimic web demo: for its 7 query bodies, "
-    f"min(phi, {DEMO_MAX_DISTANCE_M:g} m) and grad in the body's own frame.",
+    f"min(|phi|, {DEMO_MAX_DISTANCE_M:g} m) and the unsigned field's gradient in the body's own frame, zero beyond "
+    f"{DEMO_MAX_DISTANCE_M:g} m (the viewer's unsigned voxel grid).",
 ]
 
 
@@ -89,7 +90,8 @@ def _features(cfg: FeatureConfig, objects: list[str]) -> list[Feature]:
             DF_DEMO,
             "float32",
             feature_names(cfg.demo_links, DEMO_PARTS),
-            f"released-demo layout per query body: min(phi, {cfg.demo_max_distance_m:g} m), grad phi in the body frame",
+            f"released-demo layout per query body: min(|phi|, {cfg.demo_max_distance_m:g} m), the unsigned "
+            "field's grad in the body frame, zero beyond",
             "m, 1",
         ),
         Feature(

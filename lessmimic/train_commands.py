@@ -1,4 +1,4 @@
-"""``lessmimic train-bc``, ``lessmimic train-aip`` and ``lessmimic eval``: the training commands (:mod:`train`);
+"""``lessmimic train-bc``, ``train-aip``, ``export`` and ``eval``: the training commands (:mod:`train`);
 the rest of the command line is :mod:`lessmimic.cli`, which registers these with :func:`add_train`."""
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ def _cmd_train_bc(a: argparse.Namespace) -> int:
         select_episodes=a.select_episodes,
         seed=a.seed,
         device=a.device,
+        contract=a.contract,
     )
     report = train(cfg, ab.run, overwrite=a.overwrite)
     scale, last = report["scale"], report["scale"].get("dagger_last", {})
@@ -47,9 +48,16 @@ def _cmd_train_bc(a: argparse.Namespace) -> int:
 def _cmd_export(a: argparse.Namespace) -> int:
     import torch
 
+    torch.set_num_threads(a.threads)
+    if a.format == "lessmimic-demo":
+        from train.export.demo import DEMO_FILES, export_demo
+
+        out = export_demo(a.policy, a.out, overwrite=a.overwrite)
+        sizes = ", ".join(f"{f} {(out / f).stat().st_size / 1e6:.2f} MB" for f in DEMO_FILES)
+        print(f"exported {a.policy} in the released demo's contract -> {out}/ ({sizes})")
+        return 0
     from train.export.onnx_policy import export_onnx
 
-    torch.set_num_threads(a.threads)
     r = export_onnx(a.policy, a.out, overwrite=a.overwrite)
     print(
         f"exported {a.policy} -> {r.path} ({r.bytes / 1e6:.2f} MB) in {r.seconds:.1f} s; onnxruntime vs torch "
@@ -75,19 +83,29 @@ def _cmd_eval(a: argparse.Namespace) -> int:
     cfg = EvalConfig(seeds=tuple(int(s) for s in a.seeds.split(",")), episodes=a.episodes, envs=a.envs)
     results = []
     if a.policy:
-        layout = dataset_layout(stage_dir(a.name, "features"))  # the corpus's links and actuator profile
-        expect = {"links": layout.links, "actuator_profile": layout.actuator_profile}
         if Path(a.policy).suffix == ".onnx":  # an exported file, run by onnxruntime in the same harness
             from train.export.runtime import OnnxPolicy
 
-            policy = OnnxPolicy(a.policy, expect)
+            policy = OnnxPolicy(a.policy)
         else:
-            policy = load_policy(a.policy, expect)
+            policy = load_policy(a.policy)
+        # the corpus's links (of the policy's contract) and actuator profile
+        want = dataset_layout(stage_dir(a.name, "features"), policy.layout.history, policy.layout.contract)
+        if bad := policy.layout.mismatch({"links": want.links, "actuator_profile": want.actuator_profile}):
+            raise InputError(a.policy, *bad)
         results.append(evaluate(PolicyActor(policy), episodes, cfg, f"policy ({Path(a.policy).parent.name})"))
     if a.teacher:
         results.append(evaluate(TeacherActor(), episodes, cfg, "QP teacher, 1.0x reference"))
+    if a.demo_loop:  # the released viewer's loop, replicated, on the export in its contract (train/export/demo_loop.py)
+        from train.export.demo_loop import evaluate_demo_loop
+
+        cells = {
+            f"{task}@1": evaluate_demo_loop(a.demo_loop, episodes, task, cfg.seeds, cfg.episodes)
+            for task in a.demo_tasks.split(",")
+        }
+        results.append({"label": f"viewer-loop replica ({Path(a.demo_loop).name})", "cells": cells})
     if not results:
-        raise InputError(None, "--policy", "nothing to evaluate: pass --policy and/or --teacher")
+        raise InputError(None, "--policy", "nothing to evaluate: pass --policy, --teacher and/or --demo-loop")
     out = Path(a.out) if a.out else (Path(a.policy).parent / "eval" if a.policy else Path("runs") / "eval")
     note = scale_note(a.name, cfg, a.policy)
     print(write(results, out, note))
@@ -175,6 +193,14 @@ def add_train(sub) -> None:
         help="validation rollouts per task and candidate that choose policy.pt (default 0: the last candidate, "
         "the mean of the last three iterations' weights)",
     )
+    p.add_argument(
+        "--contract",
+        default="lessmimic",
+        choices=("lessmimic", "lessmimic_demo"),
+        help="the observation contract (default lessmimic, the paper's); lessmimic_demo: the released web demo's "
+        "(its 7 bodies' 4-part DF, unit latents, the command with its task condition), for `lessmimic export "
+        "--format lessmimic-demo`; train it on a corpus physicalized with PROFILE=lessmimic_demo",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (1 is fastest on a loaded 2-core machine)")
@@ -205,7 +231,16 @@ def add_train(sub) -> None:
         "export", help="a trained policy (runs/<RUN>/policy.pt, any interaction policy) as ONNX with its metadata"
     )
     p.add_argument("--policy", required=True, help="the checkpoint (runs/<RUN>/policy.pt, runs/<RUN>/aip/policy.pt)")
-    p.add_argument("--out", default=None, help="the ONNX file (default: beside the checkpoint, .onnx)")
+    p.add_argument(
+        "--format",
+        default="onnx",
+        choices=("onnx", "lessmimic-demo"),
+        help="onnx: one file with its metadata (default); lessmimic-demo: the released web demo's three files, for a "
+        "policy trained with --contract lessmimic_demo",
+    )
+    p.add_argument(
+        "--out", default=None, help="the ONNX file (default: beside the checkpoint, .onnx; lessmimic-demo: a folder)"
+    )
     p.add_argument("--overwrite", action="store_true", help="replace an existing export")
     p.add_argument("--threads", type=int, default=1)
     p.set_defaults(func=_cmd_export)
@@ -214,6 +249,13 @@ def add_train(sub) -> None:
         "--policy", default=None, help="a policy checkpoint (runs/<RUN>/policy.pt) or its ONNX export (.onnx)"
     )
     p.add_argument("--teacher", action="store_true", help="also score the QP teacher tracking the 1.0x reference")
+    p.add_argument(
+        "--demo-loop",
+        default=None,
+        help="also score a `lessmimic export --format lessmimic-demo` folder in the replica of the released viewer's "
+        "loop (its 2 ms physics, PD law and voxel-grid distance field) at scale 1.0",
+    )
+    p.add_argument("--demo-tasks", default="PickUp", help="the tasks of --demo-loop (default PickUp)")
     p.add_argument("--name", default="corpus", help="the corpus whose episodes are evaluated (default corpus)")
     p.add_argument("--seeds", default="0,1,2", help="evaluation seeds (default 0,1,2)")
     p.add_argument(

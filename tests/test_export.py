@@ -1,9 +1,11 @@
 """ONNX export (train.export): parity with torch on recorded observations, the metadata contract, the exported file
-in the evaluation harness, and each bad input as a one-line error that leaves nothing behind."""
+in the evaluation harness, the released demo's contract (its three files, input names and shapes), and each bad
+input as a one-line error that leaves nothing behind."""
 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import onnx
@@ -12,14 +14,25 @@ import torch
 from mocap_paths import expect_input_error
 
 from pipeline.robot import G1_JOINT_NAMES, actuator_profile
+from pipeline.stage.paths import stage_dir
 from pipeline.terms import layout as L
 from train.actors import PolicyActor
+from train.bc import BCConfig, train_bc
 from train.evaluation.table2 import EvalConfig, evaluate
+from train.export.demo import DEMO_FILES, DEMO_INPUTS, demo_inputs, export_demo
+from train.export.demo_loop import run_demo_episode
 from train.export.metadata import METADATA_KEY, sha256
 from train.export.onnx_policy import export_onnx
 from train.export.parity import parity, recorded_windows
 from train.export.runtime import OnnxPolicy, read_metadata
-from train.policy import load_policy
+from train.policy import PolicyConfig, load_policy
+from train.vae import VAEConfig
+
+
+def OnnxSession(path):
+    import onnxruntime as ort
+
+    return ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
 
 
 @pytest.fixture(scope="module")
@@ -106,5 +119,78 @@ def test_bad_inputs_are_one_line_errors_and_leave_nothing(exported, tmp_path):
     del model.metadata_props[:]
     onnx.save(model, str(plain))
     expect_input_error(lambda: OnnxPolicy(plain), tmp_path, file=plain, field=f"metadata_props.{METADATA_KEY}")
+    from lessmimic.cli import main
+
+    assert main(["eval", "--name", "train", "--policy", str(plain), "--out", str(tmp_path / "eval")]) == 2
     want = {"actuator_profile": "lessmimic_demo"}
     expect_input_error(lambda: OnnxPolicy(out, want), out.parent, file=out, field="layout.actuator_profile")
+
+
+@pytest.fixture(scope="module")
+def demo_policy(bc_corpus, tmp_path_factory):
+    """``(episodes, checkpoint, same policy under mjlab's gains)``: a tiny policy of the demo contract on the fixture
+    corpus, its checkpoint relabelled to the demo's gains (the graphs do not depend on them; the fixture corpus is
+    physicalized under mjlab's, so its episodes are relabelled alike)."""
+    episodes, _ = bc_corpus
+    run = tmp_path_factory.mktemp("demo_run")
+    features = stage_dir("train", "features")
+    train_bc(
+        features, run, BCConfig(steps=20, log_every=10), PolicyConfig(), VAEConfig(), 20, contract="lessmimic_demo"
+    )
+    ckpt = torch.load(run / "policy.pt", weights_only=True)
+    torch.save(ckpt, run / "policy_mjlab.pt")
+    ckpt["layout"]["actuator_profile"] = "lessmimic_demo"
+    torch.save(ckpt, run / "policy.pt")
+    return [replace(e, profile="lessmimic_demo") for e in episodes], run / "policy.pt", run / "policy_mjlab.pt"
+
+
+def test_the_demo_export_has_the_viewers_inputs_and_acts_as_torch(demo_policy, tmp_path):
+    episodes, checkpoint, _ = demo_policy
+    out = export_demo(checkpoint, tmp_path / "demo")
+    assert sorted(p.name for p in out.iterdir()) == sorted(DEMO_FILES)
+    shapes = {}
+    for name in ("latent_encoder.onnx", "policy.onnx"):
+        model = onnx.load(str(out / name))
+        for i in [*model.graph.input, *model.graph.output]:
+            shapes[i.name] = [d.dim_param or d.dim_value for d in i.type.tensor_type.shape.dim]
+    assert shapes == {
+        "state": ["batch", 28],
+        "latent": ["batch", 64],
+        **{k: ["batch", n] for k, n in DEMO_INPUTS.items()},
+        "action": ["batch", 29],
+    }
+    assert DEMO_INPUTS == {"proprio": 465, "movement_goal": 12, "task_condition": 2, "interaction_field": 320}
+    config = json.loads((out / "interaction_policy.json").read_text())
+    assert config["stiffness"] == actuator_profile("lessmimic_demo").kp.tolist() and config["history_length"] == 5
+    assert (
+        config["sdf"]["query_body_names"] == list(L.DEMO_LINKS) and config["policy_joint_names"][0] == G1_JOINT_NAMES[0]
+    )
+    policy = load_policy(checkpoint)
+    windows = recorded_windows(policy, episodes[:2], steps=30)
+    assert windows[1].shape[-1] == 14 and windows[2].shape[-1] == 28
+    with torch.no_grad():
+        want = policy.act(*(torch.from_numpy(w) for w in windows)).numpy()
+    feeds = demo_inputs(policy, *windows)
+    latents = feeds["interaction_field"].reshape(len(want), 5, 64)
+    np.testing.assert_allclose(np.linalg.norm(latents, axis=-1), 1.0, atol=1e-5)  # unit latents, newest first
+    np.testing.assert_allclose(feeds["proprio"][:, :29], windows[0][:, -1, :29], atol=0)  # newest joint angles first
+    raw = OnnxSession(out / "latent_encoder.onnx").run(["latent"], {"state": windows[2][:, -1]})[0]
+    unit = raw / (np.linalg.norm(raw, axis=-1, keepdims=True) + 1e-8)
+    np.testing.assert_allclose(unit, latents[:, 0], atol=1e-5)  # the encoder file gives the policy's latents
+    got = OnnxSession(out / "policy.onnx").run(["action"], feeds)[0]
+    assert np.abs(got - want).max() <= 1e-5
+    run = run_demo_episode(out, next(e for e in episodes if e.task == "PickUp"), max_steps=5)  # the viewer's loop
+    assert run["steps"] == 5 and run["episode_profile"] == "lessmimic_demo"
+
+
+def test_the_demo_export_refuses_other_contracts_gains_and_existing_files(bc_corpus, demo_policy, tmp_path):
+    _, paper_policy = bc_corpus
+    _, checkpoint, mjlab_gains = demo_policy
+    out = tmp_path / "demo"
+    expect_input_error(lambda: export_demo(paper_policy, out), tmp_path, file=paper_policy, field="layout.contract")
+    expect_input_error(
+        lambda: export_demo(mjlab_gains, out), tmp_path, file=mjlab_gains, field="layout.actuator_profile"
+    )
+    export_demo(checkpoint, out)
+    expect_input_error(lambda: export_demo(checkpoint, out), tmp_path, file=out / DEMO_FILES[0], field="output")
+    assert export_demo(checkpoint, out, overwrite=True) == out

@@ -55,14 +55,16 @@ def test_surface_point_velocity_matches_finite_differences():
     np.testing.assert_allclose(vt.numpy(), v, atol=1e-12)
 
 
-def test_demo_layout_clips_distance_and_rotates_grad_into_the_body():
+def test_demo_layout_is_the_viewers_unsigned_field_clipped_and_in_the_body_frame():
     phi = np.array([[0.3, 2.5]])
     grad = np.array([[[1.0, 0, 0], [0, 0, 1.0]]])
     yaw90 = Rotation.from_euler("z", 90, degrees=True).as_matrix()  # body x-axis points along world y
     rot = np.stack([np.eye(3), yaw90])[None]
     d = demo_features(phi, grad, rot, max_distance=1.0)
     np.testing.assert_allclose(d[0, 0], [0.3, 1, 0, 0], atol=1e-12)
-    np.testing.assert_allclose(d[0, 1], [1.0, 0, 0, 1], atol=1e-12)
+    np.testing.assert_allclose(d[0, 1], [1.0, 0, 0, 0], atol=1e-12)  # beyond 1 m: the viewer's (1, 0, 0, 0)
+    inside = demo_features(np.array([-0.05]), np.array([[0, 0, 1.0]]), np.eye(3)[None])  # unsigned: away from the face
+    np.testing.assert_allclose(inside[0], [0.05, 0, 0, -1], atol=1e-12)
     world_x_in_yawed_body = demo_features(np.array([0.1]), np.array([[1.0, 0, 0]]), yaw90[None])
     np.testing.assert_allclose(world_x_in_yawed_body[0, 1:], [0, -1, 0], atol=1e-12)
 

@@ -13,12 +13,13 @@ from physicalize.stage import run_stage as physicalize_stage
 from pipeline.dataset.read import episode_ranges, read_columns
 from pipeline.errors import InputError
 from pipeline.stage.paths import stage_dir
+from pipeline.terms.layout import DEMO_LINKS, TASK_CONDITION
 from train.actors import TeacherActor
-from train.bc import BCConfig, train_bc
-from train.envs.cpu.env import InteractionEnv
+from train.bc import BCConfig, WindowTensors, train_bc
+from train.envs.cpu.env import EnvConfig, InteractionEnv
 from train.episodes import load_episodes, scaled_objects
 from train.evaluation.table2 import EvalConfig, evaluate, interval95, markdown, scale_line, scale_note
-from train.policy import PolicyConfig
+from train.policy import PolicyConfig, dataset_layout
 from train.teacher import Teacher
 from train.vae import VAEConfig
 
@@ -36,6 +37,17 @@ def corpus(tmp_path_factory):
     mp.undo()
 
 
+def _replayed(env: InteractionEnv, corpus, every: int):
+    """``(episode index, frame, observation)`` of ``env`` put into every ``every``-th recorded state of each episode."""
+    for e, episode in enumerate(corpus):
+        env.reset([(episode, 1.0)])
+        slot, sim = env.slots[0], episode.simulated
+        for t in range(0, sim.frames, every):
+            slot.t, slot.last_action = t, (sim.action[t - 1] if t else np.zeros(29))
+            slot.set_state(sim.robot.qpos[t], sim.qvel[t], np.concatenate([o.pose[t] for o in sim.robot.objects]))
+            yield e, t, env.observe()
+
+
 def test_replayed_states_give_the_features_dataset_columns(corpus):
     """The environment's observation of each recorded state is the features dataset's row, to the last bit."""
     cols = read_columns(
@@ -43,20 +55,32 @@ def test_replayed_states_give_the_features_dataset_columns(corpus):
     )
     starts, _, _ = episode_ranges(stage_dir("train", "features"))
     env = InteractionEnv()
-    for e, episode in enumerate(corpus):
-        env.reset([(episode, 1.0)])
-        slot, sim = env.slots[0], episode.simulated
-        for t in range(0, sim.frames, 7):
-            slot.t, slot.last_action = t, (sim.action[t - 1] if t else np.zeros(29))
-            slot.set_state(sim.robot.qpos[t], sim.qvel[t], np.concatenate([o.pose[t] for o in sim.robot.objects]))
-            obs = env.observe()
-            for key, column in (
-                ("proprio", "observation.proprio"),
-                ("root_command", "observation.root_command"),
-                ("df", "observation.df"),
-            ):
-                np.testing.assert_allclose(getattr(obs, key)[0], cols[column][starts[e] + t], rtol=0, atol=1e-6)
-                assert np.array_equal(getattr(obs, key)[0].astype(np.float32), cols[column][starts[e] + t])
+    for e, t, obs in _replayed(env, corpus, every=7):
+        for key, column in (
+            ("proprio", "observation.proprio"),
+            ("root_command", "observation.root_command"),
+            ("df", "observation.df"),
+        ):
+            np.testing.assert_allclose(getattr(obs, key)[0], cols[column][starts[e] + t], rtol=0, atol=1e-6)
+            assert np.array_equal(getattr(obs, key)[0].astype(np.float32), cols[column][starts[e] + t])
+
+
+def test_the_demo_contracts_observation_is_the_features_datasets_too(corpus):
+    """Under the released demo's contract the environment observes ``observation.df_demo`` and the dataset's root
+    command with z zeroed and the task condition appended: what BC's windows of that contract hold."""
+    features = stage_dir("train", "features")
+    cols = read_columns(features, ["observation.root_command", "observation.df_demo"])
+    starts, _, tasks = episode_ranges(features)
+    layout = dataset_layout(features, 5, "lessmimic_demo")
+    assert layout.links == DEMO_LINKS and layout.df_dim == 28 and layout.root_command_dim == 14
+    windows = WindowTensors.from_dataset(features, 5, layout=layout)
+    for e, t, obs in _replayed(InteractionEnv(EnvConfig.for_policy(layout)), corpus, every=29):
+        row = starts[e] + t
+        assert np.array_equal(obs.df[0].astype(np.float32), cols["observation.df_demo"][row])
+        want = np.concatenate([cols["observation.root_command"][row], [TASK_CONDITION[tasks[e]]] * 2])
+        want[[2, 11]] = 0.0
+        np.testing.assert_allclose(obs.root_command[0], want, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(windows.root_command[row].numpy(), want, rtol=0, atol=1e-6)
 
 
 def test_the_episodes_actuator_profile_drives_the_environment_and_binds_the_policy(corpus):

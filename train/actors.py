@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 from pipeline.errors import InputError
-from train.envs.cpu.env import History, InteractionEnv, Obs
+from train.envs.cpu.env import EnvConfig, History, InteractionEnv, Obs
 from train.teacher import Teacher, episode_reference
 
 
@@ -18,6 +18,10 @@ class PolicyActor:
     def __init__(self, policy, device: str = "cpu"):
         self.policy, self.device = policy.eval(), device
         self.history = History(policy.config.history)
+
+    def env_config(self, **kw) -> EnvConfig:
+        """The environment that observes what the policy reads (its DF links and observation contract)."""
+        return EnvConfig.for_policy(self.policy.layout, **kw)
 
     def reset(self, env: InteractionEnv) -> None:
         want = self.policy.layout.actuator_profile
@@ -49,6 +53,9 @@ class TeacherActor:
     def __init__(self):
         self.teachers: list[Teacher] = []
         self._refs: dict[int, object] = {}
+
+    def env_config(self, **kw) -> EnvConfig:
+        return EnvConfig(**kw)
 
     def reset(self, env: InteractionEnv) -> None:
         self.teachers = []

@@ -210,7 +210,10 @@ def build(name: str, policy_path: str | Path, config: PostTrainConfig, device: s
     env_cfg = replace(config.env, seed=config.seed)
     if config.ablation == "-Rand":
         env_cfg = replace(env_cfg, randomization=RandomizationConfig.off())
-    history = load_policy(policy_path).layout.history
+    layout = load_policy(policy_path).layout
+    if layout.contract != "lessmimic":  # the priors and both backends observe the paper's contract
+        raise InputError(policy_path, "layout.contract", f"{layout.contract!r}: post-training reads 'lessmimic' only")
+    history = layout.history
     if config.backend == "mjlab":
         from train.envs.mjlab.env import MjlabPostTrainEnv, runnable_episodes
 

@@ -36,11 +36,12 @@ from pipeline.errors import InputError
 from pipeline.stage.atomic import write_json_atomic
 from pipeline.terms import layout as L
 from pipeline.terms.layout import DF_PARTS, feature_names
+from pipeline.terms.observations import demo_command
 from train.normalize import Normalizer
 from train.policy import (
-    COLUMNS,
     InteractionPolicy,
     PolicyConfig,
+    PolicyLayout,
     dataset_layout,
     make_policy,
     save_policy,
@@ -108,21 +109,34 @@ class WindowTensors:
         return cls(*flat, rows, action.float())
 
     @classmethod
-    def from_window_dataset(cls, ds: WindowDataset, episodes: Sequence[int] | None = None) -> WindowTensors:
-        """Every frame of ``episodes`` (default all) as the last step of a window; only their frames are kept."""
+    def from_window_dataset(
+        cls, ds: WindowDataset, episodes: Sequence[int] | None = None, layout: PolicyLayout | None = None
+    ) -> WindowTensors:
+        """Every frame of ``episodes`` (default all) as the last step of a window; only their frames are kept. The
+        DF column and the command are ``layout``'s (default the paper's contract; the demo contract's command is
+        :func:`pipeline.terms.observations.demo_command` with each frame's episode task)."""
+        columns = (layout or PolicyLayout(())).columns
         ep = ds.episode_index.numpy()
         keep = np.flatnonzero(np.isin(ep, list(episodes))) if episodes is not None else np.arange(len(ep))
         keep_t = torch.from_numpy(keep)
         rows = torch.maximum(keep_t[:, None] + ds.offsets, ds.ep_start[keep_t][:, None])  # pad: the first frame
         remap = torch.full((len(ep),), -1, dtype=torch.int64)
         remap[keep_t] = torch.arange(len(keep_t))
-        frame = {k: ds.data[k][keep_t] for k in COLUMNS}
-        return cls(frame[L.PROPRIO], frame[L.ROOT_COMMAND], frame[L.DF], remap[rows], frame[L.ACTION])
+        frame = {k: ds.data[k][keep_t] for k in columns}
+        command = frame[L.ROOT_COMMAND]
+        if layout is not None and layout.demo:
+            tasks = episode_ranges(ds.root)[2]
+            value = torch.tensor([L.TASK_CONDITION.get(tasks[e], 0.0) for e in ep[keep]], dtype=command.dtype)
+            command = demo_command(command, value)
+        return cls(frame[L.PROPRIO], command, frame[columns[2]], remap[rows], frame[L.ACTION])
 
     @classmethod
-    def from_dataset(cls, root: str | Path, history: int, episodes: Sequence[int] | None = None) -> WindowTensors:
-        require_columns(root, COLUMNS)  # a missing column: one line naming it
-        return cls.from_window_dataset(WindowDataset(root, COLUMNS, history), episodes)
+    def from_dataset(
+        cls, root: str | Path, history: int, episodes: Sequence[int] | None = None, layout: PolicyLayout | None = None
+    ) -> WindowTensors:
+        columns = (layout or PolicyLayout(())).columns
+        require_columns(root, columns)  # a missing column: one line naming it
+        return cls.from_window_dataset(WindowDataset(root, columns, history), episodes, layout)
 
     @staticmethod
     def concat(parts: Sequence[WindowTensors]) -> WindowTensors:
@@ -239,7 +253,7 @@ def _vae_for(root: Path, run_dir: Path, layout, vae_config: VAEConfig, vae_steps
         if tuple(vae.links) != tuple(layout.links):
             raise InputError(path, "names", f"VAE reads links {list(vae.links)}, the dataset has {list(layout.links)}")
         return vae, {"loaded": str(path)}
-    report = train_vae(root, vae_config, path, device, steps=vae_steps)
+    report = train_vae(root, vae_config, path, device, steps=vae_steps, column=layout.df_column)
     return load_vae(path, device), report
 
 
@@ -251,21 +265,23 @@ def train_bc(
     vae_config: VAEConfig = VAEConfig(),
     vae_steps: int | None = None,
     device: str | torch.device = "cpu",
+    contract: str = "lessmimic",
 ) -> dict:
-    """Pre-train pi_base on a features dataset: the VAE (or ``run_dir/vae.pt``), windows of ``policy_config.history``
+    """Pre-train pi_base on a features dataset under the observation ``contract``
+    (:data:`pipeline.terms.layout.CONTRACTS`): the VAE (or ``run_dir/vae.pt``), windows of ``policy_config.history``
     frames (the held-out ``config.holdout`` of the episodes apart), normalisers from the training frames, :func:`fit`
     logging to ``run_dir/bc_log.jsonl``, and ``run_dir/policy.pt`` + ``run_dir/bc_report.json`` written atomically.
     A dataset lacking a needed column is a one-line :class:`InputError` before anything is written."""
     root, run_dir, t0 = Path(features_root), Path(run_dir), time.perf_counter()
     if vae_config.latent != policy_config.latent:
         raise ValueError(f"vae_config.latent {vae_config.latent} != policy_config.latent {policy_config.latent}")
-    layout = dataset_layout(root, policy_config.history)
+    layout = dataset_layout(root, policy_config.history, contract)
     vae, vae_report = _vae_for(root, run_dir, layout, vae_config, vae_steps, device)
 
     train_eps, held = split_episodes(len(episode_ranges(root)[0]), config.holdout)
-    ds = WindowDataset(root, COLUMNS, policy_config.history)
-    train = WindowTensors.from_window_dataset(ds, train_eps)
-    heldout = WindowTensors.from_window_dataset(ds, held) if held else None
+    ds = WindowDataset(root, layout.columns, policy_config.history)
+    train = WindowTensors.from_window_dataset(ds, train_eps, layout)
+    heldout = WindowTensors.from_window_dataset(ds, held, layout) if held else None
 
     torch.manual_seed(config.seed)
     policy = make_policy(policy_config, layout, vae.cpu(), train.frames()).to(device)

@@ -27,3 +27,6 @@ class TrainConfig:
     select_episodes: int = 0  # validation rollouts per candidate and task (train.evaluation.select); 0: the last one
     seed: int = 0
     device: str = "cpu"
+    contract: str = (
+        "lessmimic"  # the observation contract (pipeline.terms.layout.CONTRACTS): lessmimic_demo for the demo
+    )

@@ -74,7 +74,7 @@ def collect(
     sq_err, count, lengths, falls, success = 0.0, 0, [], 0, []
     tasks: dict[str, list[int]] = {}  # task -> [successes, episodes]
     for k in range(0, len(episodes), envs):
-        env = InteractionEnv(EnvConfig())
+        env = InteractionEnv(EnvConfig.for_policy(policy.layout))
         env.reset([(e, 1.0) for e in episodes[k : k + envs]])
         student = PolicyActor(policy)
         student.reset(env)

@@ -37,7 +37,8 @@ from train.normalize import MIN_STD, Normalizer
 from train.vae import DFVAE, df_links, mlp, require_columns
 
 COLUMNS = (L.PROPRIO, L.ROOT_COMMAND, L.DF, L.ACTION)
-"""What a policy is trained on, per window step (:mod:`pipeline.terms.layout`)."""
+"""What a policy of the paper's contract is trained on, per window step (:mod:`pipeline.terms.layout`);
+:attr:`PolicyLayout.columns` for any contract."""
 POLICY_FORMAT = "lessmimic.interaction_policy/1"
 
 
@@ -71,8 +72,9 @@ class PolicyConfig:
 
 @dataclass(frozen=True)
 class PolicyLayout:
-    """What a checkpoint reads and drives: the DF ``links`` (K, in ``observation.df`` order), input and output
-    sizes, the ``actuator_profile`` its joint targets are meant for, and the ``history`` length l."""
+    """What a checkpoint reads and drives: the DF ``links`` (K, in the DF column's order), input and output
+    sizes, the ``actuator_profile`` its joint targets are meant for, the ``history`` length l and the observation
+    ``contract`` (:data:`pipeline.terms.layout.CONTRACTS`; checkpoints from before it are the paper's)."""
 
     links: tuple[str, ...]
     proprio_dim: int = L.PROPRIO_DIM
@@ -80,12 +82,30 @@ class PolicyLayout:
     action_dim: int = L.ACTION_DIM
     actuator_profile: str = DEFAULT_PROFILE
     history: int = L.HISTORY
+    contract: str = "lessmimic"
+
+    def __post_init__(self):
+        L.check_contract(self.contract)
+
+    @property
+    def demo(self) -> bool:
+        return self.contract == "lessmimic_demo"
+
+    @property
+    def df_column(self) -> str:
+        return L.CONTRACT_DF[self.contract][0]
+
+    @property
+    def columns(self) -> tuple[str, str, str, str]:
+        """The features dataset's columns the policy is trained on: proprio, root command, its DF, the action."""
+        return (L.PROPRIO, L.ROOT_COMMAND, self.df_column, L.ACTION)
 
     @property
     def observation(self) -> L.ObservationLayout:
         """The observation this policy reads (its windows, flat or split:
         :class:`pipeline.terms.layout.ObservationLayout`)."""
-        return L.ObservationLayout(self.links, self.history, self.proprio_dim, self.root_command_dim)
+        parts = len(L.CONTRACT_DF[self.contract][1])
+        return L.ObservationLayout(self.links, self.history, self.proprio_dim, self.root_command_dim, parts)
 
     @property
     def df_dim(self) -> int:
@@ -109,17 +129,20 @@ class PolicyLayout:
         return None
 
 
-def dataset_layout(root: str | Path, history: int = L.HISTORY) -> PolicyLayout:
-    """The layout a policy trained on the features dataset at ``root`` has (one-line error for a missing column)."""
-    info = require_columns(root, COLUMNS)
-    dim = {c: int(info["features"][c]["shape"][0]) for c in COLUMNS}
+def dataset_layout(root: str | Path, history: int = L.HISTORY, contract: str = "lessmimic") -> PolicyLayout:
+    """The layout a policy of ``contract`` trained on the features dataset at ``root`` has (one-line error for a
+    missing column); the demo contract's command is the dataset's root command plus the task condition."""
+    columns = PolicyLayout((), contract=contract).columns
+    info = require_columns(root, columns)
+    dim = {c: int(info["features"][c]["shape"][0]) for c in columns}
     return PolicyLayout(
-        links=df_links(info["features"][L.DF]["names"], root),
+        links=df_links(info["features"][columns[2]]["names"], root),
         proprio_dim=dim[L.PROPRIO],
-        root_command_dim=dim[L.ROOT_COMMAND],
+        root_command_dim=dim[L.ROOT_COMMAND] + (L.DEMO_COMMAND_DIM - L.ROOT_COMMAND_DIM) * (contract != "lessmimic"),
         action_dim=dim[L.ACTION],
         actuator_profile=dataset_actuator_profile(root),
         history=int(history),
+        contract=contract,
     )
 
 
@@ -183,13 +206,25 @@ class InteractionPolicy(nn.Module):
         if x.ndim != 3 or x.shape[1] != self.config.history or x.shape[2] != dim:
             raise ValueError(f"{name}: expected (B, {self.config.history}, {dim}), got {tuple(x.shape)}")
 
-    def tokens(self, proprio: torch.Tensor, root_command: torch.Tensor, df: torch.Tensor) -> torch.Tensor:
-        """``(B, l, P + C + latent)``: normalised proprio and root command with the VAE's ``mu`` of ``df``."""
-        self._check("proprio", proprio, self.layout.proprio_dim)
-        self._check("root_command", root_command, self.layout.root_command_dim)
-        self._check("df", df, self.layout.df_dim)
+    def latents(self, df: torch.Tensor) -> torch.Tensor:
+        """The VAE's ``mu`` of ``df`` (..., latent); under the demo contract unit-norm, ``mu / (|mu| + 1e-8)``, as the
+        released viewer normalises its latent encoder's output."""
         with torch.no_grad():
             z = self.vae.encode(df)
+        return z / (z.norm(dim=-1, keepdim=True) + 1e-8) if self.layout.demo else z
+
+    def tokens(self, proprio: torch.Tensor, root_command: torch.Tensor, df: torch.Tensor) -> torch.Tensor:
+        """``(B, l, P + C + latent)``: normalised proprio and root command with the latents of ``df``."""
+        self._check("df", df, self.layout.df_dim)
+        return self.tokens_from_latents(proprio, root_command, self.latents(df))
+
+    def tokens_from_latents(self, proprio: torch.Tensor, root_command: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+        """:meth:`tokens` from latents ``z (B, l, latent)``. The demo contract reads the current step's command only
+        (its viewer feeds one movement goal, no history): every step's token carries the last one."""
+        self._check("proprio", proprio, self.layout.proprio_dim)
+        self._check("root_command", root_command, self.layout.root_command_dim)
+        if self.layout.demo:
+            root_command = root_command[:, -1:].expand_as(root_command)
         return torch.cat(
             [self.norm["proprio"].normalize(proprio), self.norm["root_command"].normalize(root_command), z], -1
         )

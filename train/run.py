@@ -65,15 +65,22 @@ def train(config: TrainConfig, run_dir: str | Path, *, overwrite: bool = False) 
     bc = BCConfig(steps=config.bc_steps, batch=config.batch, seed=config.seed)
     if not (run_dir / "policy_bc.pt").is_file():
         report = train_bc(
-            features, run_dir, bc, policy_config, VAEConfig(), vae_steps=config.vae_steps, device=config.device
+            features,
+            run_dir,
+            bc,
+            policy_config,
+            VAEConfig(),
+            vae_steps=config.vae_steps,
+            device=config.device,
+            contract=config.contract,
         )
         save_policy(
             load_policy(run_dir / "policy.pt", device=config.device), run_dir / "policy_bc.pt", bc_report=report
         )
     policy = load_policy(run_dir / "policy_bc.pt", device=config.device)
     train_eps, held = split_episodes(len(episodes), bc.holdout)
-    data = WindowTensors.from_dataset(features, config.history, train_eps)
-    heldout = WindowTensors.from_dataset(features, config.history, held) if held else None
+    data = WindowTensors.from_dataset(features, config.history, train_eps, policy.layout)
+    heldout = WindowTensors.from_dataset(features, config.history, held, policy.layout) if held else None
     dagger_config = DAggerConfig(
         iterations=config.dagger_iterations,
         episodes=config.dagger_episodes,

@@ -27,7 +27,7 @@ from torch import nn
 from pipeline.dataset.read import episode_ranges, read_columns, read_info
 from pipeline.errors import InputError
 from pipeline.stage.atomic import write_torch_atomic
-from pipeline.terms.layout import DF, DF_PARTS
+from pipeline.terms.layout import DEMO_PARTS, DF, DF_PARTS
 from train.normalize import Normalizer
 
 VAE_FORMAT = "lessmimic.df_vae/1"
@@ -74,15 +74,16 @@ def split_episodes(n_episodes: int, frac: float = 0.1, seed: int = HOLDOUT_SEED)
 
 
 def df_links(names: Sequence[str], where: str | Path | None = None) -> tuple[str, ...]:
-    """The K link names of ``observation.df`` element names ``<link>.<part>`` (parts in :data:`DF_PARTS` order)."""
-    parts = len(DF_PARTS)
-    if len(names) == 0 or len(names) % parts:
-        raise InputError(where, DF, f"{len(names)} elements is not K x {parts}")
-    links = tuple(n.rsplit(".", 1)[0] for n in names[::parts])
-    want = tuple(f"{link}.{p}" for link in links for p in DF_PARTS)
-    if tuple(names) != want:
-        raise InputError(where, DF, f"element names are not <link>.<part> with parts {DF_PARTS}")
-    return links
+    """The K link names of DF element names ``<link>.<part>``: the paper's parts (:data:`DF_PARTS`, 10 per link)
+    or the demo contract's (:data:`DEMO_PARTS`, 4), in that order."""
+    for parts in (DF_PARTS, DEMO_PARTS):
+        if len(names) == 0 or len(names) % len(parts):
+            continue
+        links = tuple(n.rsplit(".", 1)[0] for n in names[:: len(parts)])
+        if tuple(names) == tuple(f"{link}.{p}" for link in links for p in parts):
+            return links
+    why = f"{len(names)} element names are not <link>.<part> with parts {DF_PARTS} or {DEMO_PARTS}"
+    raise InputError(where, DF, why)
 
 
 def mlp(sizes: Sequence[int]) -> nn.Sequential:
@@ -195,6 +196,8 @@ def evaluate_vae(vae: DFVAE, u: torch.Tensor, chunk: int = 65536) -> dict:
     out: dict = {"rmse": {}, "baseline_rmse": {}}
     for group, prefixes in GROUPS.items():
         cols = [i for i, p in enumerate(parts) if p.startswith(prefixes)]
+        if not cols:  # the demo contract's DF has no velocities
+            continue
         out["rmse"][group] = e[:, cols].pow(2).mean().sqrt().item()
         out["baseline_rmse"][group] = base[:, cols].pow(2).mean().sqrt().item()
     out["kl_per_dim"] = kl_dim.mean().item()
@@ -224,21 +227,23 @@ def train_vae(
     out_path: str | Path | None = None,
     device: str | torch.device = "cpu",
     steps: int | None = None,
+    column: str = DF,
 ) -> dict:
-    """Train the VAE on every frame of ``observation.df`` of the training episodes; evaluate on the held-out
+    """Train the VAE on every frame of ``column`` (``observation.df``; the demo contract's ``observation.df_demo``)
+    of the training episodes; evaluate on the held-out
     episodes (all frames when there is one episode); save to ``out_path`` (atomically) if given.
 
     Returns the report: frames, held-out episodes, final loss parts, :func:`evaluate_vae`'s figures on the
     evaluation frames, the reconstruction RMSE on the training frames (``rmse_train``), seconds.
     """
     root, t0 = Path(features_root), time.perf_counter()
-    names = require_columns(root, [DF])["features"][DF]["names"]
+    names = require_columns(root, [column])["features"][column]["names"]
     df_links(names, root)
-    cols = read_columns(root, [DF, "episode_index"])
+    cols = read_columns(root, [column, "episode_index"])
     train_eps, held = split_episodes(len(episode_ranges(root)[0]), config.holdout)
     ep = cols["episode_index"][:, 0]
-    u_train = cols[DF][np.isin(ep, train_eps)]
-    u_eval = cols[DF][np.isin(ep, held)] if held else cols[DF]
+    u_train = cols[column][np.isin(ep, train_eps)]
+    u_eval = cols[column][np.isin(ep, held)] if held else cols[column]
     torch.manual_seed(config.seed)
     vae = DFVAE(names, config, Normalizer.from_array(u_train, config.min_std)).to(device)
     gen = torch.Generator(device=device).manual_seed(config.seed)

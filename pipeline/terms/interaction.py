@@ -12,7 +12,8 @@ the hands (Carry). The interaction window ``I_t = {u_(t-l+1) .. u_t}`` is served
 (LeRobot ``delta_timestamps``, :class:`pipeline.dataset.windows.WindowDataset`); datasets store u_t.
 
 The demo layout (:func:`demo_features`, the LessMimic web demo's input contract): per query body,
-``min(phi, max_distance)`` and the gradient in the body's own frame, ``R_body^T g`` (4 per body).
+``min(|phi|, max_distance)`` and the unsigned field's gradient in the body's own frame, zero beyond
+``max_distance`` (4 per body).
 
 Everything takes numpy arrays or torch tensors alike (RL environments compute the same online).
 """
@@ -57,7 +58,12 @@ def surface_point_velocity(closest, object_index, poses, object_vel):
 
 
 def demo_features(phi, grad, link_rot, max_distance: float = DEMO_MAX_DISTANCE_M):
-    """The demo's per-body ``[min(phi, max_distance), R^T g]`` (..., 4); ``link_rot (..., 3, 3)`` body-to-world."""
+    """The demo's per-body ``[d, R^T g_u]`` (..., 4), as its viewer computes them from an unsigned distance grid:
+    ``d = min(|phi|, max_distance)``, ``g_u = sign(phi) g`` (the unsigned field's gradient: away from the surface
+    on both sides), zero where ``|phi| >= max_distance`` (the viewer's value beyond its grid's 1 m padding is
+    ``(1, 0, 0, 0)``); ``link_rot (..., 3, 3)`` body-to-world."""
     xp = namespace(phi)
-    local = xp.einsum("...ji,...j->...i", link_rot, grad)
-    return concat([xp.clip(phi, None, max_distance)[..., None], local], xp, axis=-1)
+    far = xp.abs(phi) >= max_distance
+    g = xp.where(far[..., None], 0.0 * grad, xp.where((phi < 0)[..., None], -grad, grad))
+    local = xp.einsum("...ji,...j->...i", link_rot, g)
+    return concat([xp.clip(xp.abs(phi), None, max_distance)[..., None], local], xp, axis=-1)

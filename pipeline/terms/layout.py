@@ -15,7 +15,7 @@ column                          width         terms, in order
 ``observation.root_command``    12            position delta (3), 6-D rotation (6), target velocity (3)
 ``observation.df``              10 K          per DF link: phi, grad phi (3), v_norm (3), v_tan (3)
 ``observation.df_relative``     10 K          the same with v relative to the object's closest surface point
-``observation.df_demo``         4 x 7         the released demo's 7 bodies: min(phi, 1 m), grad in the body frame
+``observation.df_demo``         4 x 7         the released demo's 7 bodies: min(|phi|, 1 m), grad in the body frame
 ``observation.df_object``       K             the nearest object per link (datasets with several objects)
 ``action``                      29            absolute joint position targets (mjlab order)
 ==============================  ============  ==========================================================
@@ -74,6 +74,26 @@ ROOT_COMMAND_NAMES: tuple[str, ...] = (
     *("vel_x", "vel_y", "vel_z"),
 )
 PROPRIO_DIM, ROOT_COMMAND_DIM, ACTION_DIM = len(PROPRIO_NAMES), len(ROOT_COMMAND_NAMES), NUM_JOINTS
+# -- observation contracts ---------------------------------------------------------------------------------------------
+CONTRACTS = ("lessmimic", "lessmimic_demo")
+"""What a policy observes. ``lessmimic``: the paper's, ``[proprio, root_command, df]`` with the 10-part DF of
+:data:`DF_LINKS`. ``lessmimic_demo``: the released web demo's (its viewer's runner): the 4-part DF of
+:data:`DEMO_LINKS` (``observation.df_demo``), a command of the current step only, without the height delta and the
+vertical velocity (the viewer's movement goal has z = 0) and with its task condition appended
+(:func:`pipeline.terms.observations.demo_command`), and unit-norm latents (:mod:`train.policy`)."""
+CONTRACT_DF = {"lessmimic": (DF, DF_PARTS), "lessmimic_demo": (DF_DEMO, DEMO_PARTS)}
+TASK_CONDITION = {"PickUp": 1.0, "Carry": 1.0, "Push": 2.0, "SitStand": 0.0}
+"""The demo's task condition per task: 0 none, 1 carry, 2 push (its viewer's choices); PickUp is its carry
+behaviour (lift and hold), SitStand its plain walking."""
+DEMO_COMMAND_DIM = ROOT_COMMAND_DIM + 2
+
+
+def check_contract(contract: str) -> str:
+    if contract not in CONTRACTS:
+        raise ValueError(f"unknown observation contract {contract!r}; known: {', '.join(CONTRACTS)}")
+    return contract
+
+
 AMP_STATE = slice(0, 2 * NUM_JOINTS + 6)
 """The columns of ``proprio`` the AMP discriminator reads: ``[q, dq, gravity_root, omega_root]`` (64)."""
 
@@ -86,16 +106,17 @@ def feature_names(links, parts=DF_PARTS) -> tuple[str, ...]:
 @dataclass(frozen=True)
 class ObservationLayout:
     """A policy's observation: per step ``proprio`` (``proprio_dim``), ``root_command`` (``root_command_dim``) and
-    ``df`` (10 per link of ``links``), over ``history`` steps."""
+    ``df`` (``df_parts`` per link of ``links``: 10, or the demo contract's 4), over ``history`` steps."""
 
     links: tuple[str, ...] = DF_LINKS
     history: int = HISTORY
     proprio_dim: int = PROPRIO_DIM
     root_command_dim: int = ROOT_COMMAND_DIM
+    df_parts: int = len(DF_PARTS)
 
     @property
     def df_dim(self) -> int:
-        return len(DF_PARTS) * len(self.links)
+        return self.df_parts * len(self.links)
 
     @property
     def step_dims(self) -> tuple[int, int, int]:

@@ -75,6 +75,17 @@ def root_command_to(qpos, target_qpos, target_vel):
     return concat([dpos, rot6(rot), to_heading(target_vel[:, :3], yaw)], namespace(qpos), axis=1)
 
 
+def demo_command(root_command, task_value):
+    """(N, 14) the demo contract's command (:data:`pipeline.terms.layout.CONTRACTS`): ``root_command (N, 12)`` with
+    its height delta and vertical velocity zeroed (the released viewer's movement goal has z = 0) and the task
+    condition ``[v, v]`` of ``task_value (N,)`` appended (the viewer writes one value into both slots)."""
+    xp = namespace(root_command)
+    keep = xp.ones(root_command.shape[-1], dtype=root_command.dtype)
+    keep[2] = keep[11] = 0.0
+    v = xp.reshape(task_value, (-1, 1)) + 0.0 * root_command[:, :1]
+    return concat([root_command * keep, v, v], xp, axis=1)
+
+
 def command_frames(frames: int, fps: float, horizon_s: float = ROOT_HORIZON_S) -> np.ndarray:
     """(T,) the frame ``j = min(t + horizon fps, T - 1)`` each frame's root command looks at."""
     return np.minimum(np.arange(frames) + int(round(horizon_s * fps)), frames - 1)

@@ -95,7 +95,7 @@ def _switch(env: InteractionEnv, actor, i: int, nxt: Episode) -> None:
 def run_chains(actor, chains: list[list[Episode]], cfg: ChainConfig) -> list[dict]:
     """Run ``chains`` side by side with ``actor`` (a :class:`train.actors.PolicyActor`); per chain: ``success``,
     ``tasks_completed`` and why it ended (``fell``, ``strayed``, ``task_failed``)."""
-    env = InteractionEnv()
+    env = InteractionEnv(actor.env_config())
     env.reset([(c[0], 1.0) for c in chains])
     actor.reset(env)
     stage, result = [0] * len(chains), [None] * len(chains)

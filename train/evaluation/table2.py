@@ -27,7 +27,7 @@ from pipeline.robot import JOINTS_QPOS
 from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
 from pipeline.stage.figure import save_figure
 from train.dagger import read_log
-from train.envs.cpu.env import EnvConfig, InteractionEnv
+from train.envs.cpu.env import InteractionEnv
 from train.episodes import TASKS, Episode
 from train.mdp.tasks import Rules
 
@@ -56,7 +56,7 @@ class EvalConfig:
 
 
 def _run(actor, batch: list[Episode], scale: float, rng: np.random.Generator, cfg: EvalConfig) -> list[dict]:
-    env = InteractionEnv(EnvConfig(threads=cfg.threads, rules=cfg.rules))
+    env = InteractionEnv(actor.env_config(threads=cfg.threads, rules=cfg.rules))
     env.reset([(e, scale) for e in batch])
     for s in env.slots:
         q = s.data.qpos.copy()
@@ -77,34 +77,43 @@ def evaluate(actor, episodes: list[Episode], cfg: EvalConfig = EvalConfig(), lab
     cells = [(t, s) for t in cfg.tasks for s in TABLE2[t] if by_task[t] and (cfg.scales is None or s in cfg.scales)]
     out = {"label": label, "config": asdict(cfg), "cells": {}}
     for task, scale in tqdm(cells, desc=f"eval {label}", unit="cell"):
-        per_seed, outcomes = [], []
+        outcomes = []
         for seed in cfg.seeds:
             rng = np.random.default_rng(zlib.crc32(f"{seed}|{task}|{scale}".encode()))
             pick = rng.choice(len(by_task[task]), cfg.episodes, replace=len(by_task[task]) < cfg.episodes)
             runs = []
             for k in range(0, len(pick), cfg.envs):
                 runs += _run(actor, [by_task[task][i] for i in pick[k : k + cfg.envs]], scale, rng, cfg)
-            key = "contact_rate" if task == "Push" else "success"
-            per_seed.append(float(np.mean([r[key] for r in runs])))
-            outcomes += runs
-        values = [r["contact_rate" if task == "Push" else "success"] for r in outcomes]
-        low, high = interval95(values, binary=task != "Push")
+            outcomes.append(runs)
         out["cells"][f"{task}@{scale:g}"] = {
-            "task": task,
-            "scale": scale,
-            "metric": "contact_rate" if task == "Push" else "success_rate",
-            "mean": float(np.mean(per_seed)),
-            "ci95": [low, high],
-            "episodes": len(values),
-            "std": float(np.std(per_seed)),
-            "per_seed": per_seed,
-            "episodes_per_seed": cfg.episodes,
-            "seeds": list(cfg.seeds),
-            "falls": int(sum(r["fell"] for r in outcomes)),
-            "mean_steps": float(np.mean([r["steps"] for r in outcomes])),
-            **(_seated(outcomes, cfg) if task == "SitStand" else {}),
+            **summarize_cell(task, scale, outcomes, cfg.seeds),
+            **(_seated([r for runs in outcomes for r in runs], cfg) if task == "SitStand" else {}),
         }
     return out
+
+
+def summarize_cell(task: str, scale: float, runs_per_seed: list[list[dict]], seeds) -> dict:
+    """A cell of Table 2 from its episodes' outcomes, one list per evaluation seed (each outcome a
+    :meth:`train.mdp.tasks.TaskMeter.summary` plus ``fell``): the mean over seeds of the success rate (Push: the
+    contact rate), its spread over seeds, the 95% interval over every episode (:func:`interval95`), falls, length."""
+    key = "contact_rate" if task == "Push" else "success"
+    per_seed = [float(np.mean([r[key] for r in runs])) for runs in runs_per_seed]
+    outcomes = [r for runs in runs_per_seed for r in runs]
+    low, high = interval95([r[key] for r in outcomes], binary=task != "Push")
+    return {
+        "task": task,
+        "scale": scale,
+        "metric": "contact_rate" if task == "Push" else "success_rate",
+        "mean": float(np.mean(per_seed)),
+        "ci95": [low, high],
+        "episodes": len(outcomes),
+        "std": float(np.std(per_seed)),
+        "per_seed": per_seed,
+        "episodes_per_seed": len(runs_per_seed[0]),
+        "seeds": list(seeds),
+        "falls": int(sum(r["fell"] for r in outcomes)),
+        "mean_steps": float(np.mean([r["steps"] for r in outcomes])),
+    }
 
 
 def interval95(values: list[float], binary: bool) -> tuple[float, float]:

@@ -36,6 +36,13 @@ TERM_MEANING = {
     "velocity's normal (3) and tangential (3) parts with respect to that gradient [m/s]; all in the world frame",
 }
 
+DEMO_TERM_MEANING = {  # the released demo's contract (pipeline.terms.layout.CONTRACTS)
+    "root_command": TERM_MEANING["root_command"] + "; the height delta and vertical velocity are zero and the task "
+    "condition [v, v] follows (0 none, 1 carry, 2 push); only the newest step is read",
+    "df": "per step and query body: min(|phi|, 1 m) of the nearest object's unsigned distance, its gradient (3) in "
+    "the body's own frame, zero beyond 1 m",
+}
+
 
 def sha256(path: str | Path) -> str:
     h = hashlib.sha256()
@@ -50,11 +57,14 @@ def policy_metadata(policy, checkpoint: str | Path) -> dict:
     lay, cfg = policy.layout, policy.config
     obs = lay.observation
     profile = actuator_profile(lay.actuator_profile)
+    column, parts = L.CONTRACT_DF[lay.contract]
+    demo = lay.contract == "lessmimic_demo"
     names = {
         "proprio": list(L.PROPRIO_NAMES),
-        "root_command": list(L.ROOT_COMMAND_NAMES),
-        "df": list(L.feature_names(lay.links)),
+        "root_command": list(L.ROOT_COMMAND_NAMES) + (["task_condition_0", "task_condition_1"] if demo else []),
+        "df": list(L.feature_names(lay.links, parts)),
     }
+    meaning = {**TERM_MEANING, **(DEMO_TERM_MEANING if demo else {})}
     dims = dict(zip(INPUTS, obs.step_dims))
     return {
         "format": EXPORT_FORMAT,
@@ -83,10 +93,11 @@ def policy_metadata(policy, checkpoint: str | Path) -> dict:
             "order": "each input is (batch, history, width): oldest step first, newest last; before an episode's "
             "first step, that step is repeated",
             "inputs": {
-                k: {"shape": ["batch", lay.history, dims[k]], "names": names[k], "meaning": TERM_MEANING[k]}
-                for k in INPUTS
+                k: {"shape": ["batch", lay.history, dims[k]], "names": names[k], "meaning": meaning[k]} for k in INPUTS
             },
             "df_links": list(lay.links),
+            "df_column": column,
+            "contract": lay.contract,
         },
         "camera": None,
         "policy": {"config": asdict(cfg), "layout": lay.to_dict()},

@@ -76,26 +76,29 @@ def check_batch(policy: InteractionPolicy, n: int = CHECK_BATCH, seed: int = 0) 
     )
 
 
-def onnx_model(policy: InteractionPolicy) -> onnx.ModelProto:
-    """The policy's acting graph as an ONNX model (no metadata yet)."""
-    graph = ActingGraph(policy.cpu()).eval()
-    example = check_batch(policy, 2)
+def quiet_export(graph: nn.Module, example: tuple, inputs: list[str], output: str, opset: int = OPSET):
+    """``torch.onnx.export(dynamo=True)`` of ``graph`` (eval mode) with a dynamic batch axis on every input; the
+    exporter's own deprecation notices silenced. Returns the ``ONNXProgram``."""
     batch = torch.export.Dim("batch")
     with warnings.catch_warnings():  # torch.export's internal deprecation notices, not the user's business
         warnings.simplefilter("ignore", FutureWarning)
         warnings.filterwarnings("ignore", message=".*axis name.*")
-        program = torch.onnx.export(
-            graph,
+        return torch.onnx.export(
+            graph.eval(),
             example,
-            input_names=list(INPUTS),
-            output_names=[OUTPUT],
-            dynamic_shapes=({0: batch},) * len(INPUTS),
-            opset_version=OPSET,
+            input_names=inputs,
+            output_names=[output],
+            dynamic_shapes=({0: batch},) * len(inputs),
+            opset_version=opset,
             dynamo=True,
             external_data=False,
             verbose=False,
         )
-    return program.model_proto
+
+
+def onnx_model(policy: InteractionPolicy) -> onnx.ModelProto:
+    """The policy's acting graph as an ONNX model (no metadata yet)."""
+    return quiet_export(ActingGraph(policy.cpu()), check_batch(policy, 2), list(INPUTS), OUTPUT).model_proto
 
 
 def run_onnx(model: onnx.ModelProto | bytes | str | Path, inputs: tuple[np.ndarray, ...]) -> np.ndarray:

@@ -26,7 +26,7 @@ def recorded_windows(policy: InteractionPolicy, episodes: list[Episode], steps: 
     """``(proprio, root_command, df)`` windows ``(len(episodes) * steps', l, dim)`` the torch ``policy`` observed
     acting on ``episodes`` (at scale 1, together) for up to ``steps`` control steps (an episode's windows until it
     ends)."""
-    env = InteractionEnv(EnvConfig(threads=1))
+    env = InteractionEnv(EnvConfig.for_policy(policy.layout, threads=1))
     env.reset([(e, 1.0) for e in episodes])
     actor = PolicyActor(policy)
     actor.reset(env)

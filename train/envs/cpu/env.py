@@ -31,10 +31,10 @@ from pipeline.geometry import Chair, MeshGeometry, Primitive
 from pipeline.robot import FOOT_BODIES, NQ_ROBOT, NUM_JOINTS, NV_ROBOT
 from pipeline.scene import Scene, SceneObject, build_scene, hand_geoms, link_collision_geoms
 from pipeline.terms.fall import fallen
-from pipeline.terms.interaction import interaction_features
-from pipeline.terms.layout import DF_LINKS, ROOT_HORIZON_S, SUBSTEPS
+from pipeline.terms.interaction import demo_features, interaction_features
+from pipeline.terms.layout import DF_LINKS, ROOT_HORIZON_S, SUBSTEPS, TASK_CONDITION, check_contract
 from pipeline.terms.link_motion import body_ids, link_motion, link_state
-from pipeline.terms.observations import command_frames, proprioception, root_command_to
+from pipeline.terms.observations import command_frames, demo_command, proprioception, root_command_to
 from train.episodes import Episode, check_scale, scaled_objects
 from train.mdp import randomize as R
 from train.mdp.randomize import Variation
@@ -43,8 +43,9 @@ from train.mdp.tasks import Rules, StepFacts, TaskMeter
 
 @dataclass(frozen=True)
 class EnvConfig:
-    """``links``: the DF links (the observation contract's, :mod:`pipeline.terms.layout`); ``root_horizon_s``: how far
-    ahead the root command looks;
+    """``links``: the DF links (the observation contract's, :mod:`pipeline.terms.layout`; a policy's own:
+    :meth:`for_policy`); ``contract``: the observation contract (:data:`pipeline.terms.layout.CONTRACTS`: the demo's
+    DF of its bodies and its command with the task condition); ``root_horizon_s``: how far ahead the root command looks;
     ``threads``: worker threads stepping the environments. The actuator profile is each episode's
     (:attr:`train.episodes.Episode.profile`)."""
 
@@ -52,6 +53,15 @@ class EnvConfig:
     root_horizon_s: float = ROOT_HORIZON_S
     threads: int = 1
     rules: Rules = field(default_factory=Rules)
+    contract: str = "lessmimic"
+
+    def __post_init__(self):
+        check_contract(self.contract)
+
+    @classmethod
+    def for_policy(cls, layout, **kw) -> EnvConfig:
+        """The environment that observes what a policy of ``layout`` (:class:`train.policy.PolicyLayout`) reads."""
+        return cls(links=tuple(layout.links), contract=layout.contract, **kw)
 
 
 @dataclass
@@ -81,7 +91,7 @@ class History:
             self.terms[key] = np.concatenate([self.terms[key][:, 1:], value[:, None]], axis=1)
 
 
-class _Slot:
+class EnvSlot:
     """One environment: its scene, state, episode and meters."""
 
     def __init__(self, episode: Episode, scale, cfg: EnvConfig, fields: dict, variation: Variation | None = None):
@@ -102,7 +112,7 @@ class _Slot:
         self.ids = body_ids(m, cfg.links)
         key = tuple((repr(o.geometry), o.name) for o in self.objects)
         if key not in fields:  # one ObjectFields per object set: environments with the same objects share it
-            fields[key] = ObjectFields(tuple(_field(fields, o) for o in self.objects))
+            fields[key] = ObjectFields(tuple(cached_field(fields, o) for o in self.objects))
         self.fields = fields[key]
         self.box_parts = _box_parts(self.objects)
         self.field_keys = {key, *key}  # the cache entries this environment uses (InteractionEnv.reset_one prunes)
@@ -156,6 +166,12 @@ class _Slot:
         d.ctrl[:] = action
         for _ in range(SUBSTEPS):
             mujoco.mj_step(m, d)
+        self.advance(action)
+
+    def advance(self, action: np.ndarray) -> None:
+        """After the physics steps of ``action``: the kinematics the observation reads, the step count, the fall
+        test, the step's facts and the meter (shared by every loop that steps a slot its own way)."""
+        m, d = self.scene.model, self.data
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
         mujoco.mj_comVel(m, d)
@@ -191,7 +207,7 @@ class _Slot:
         )
 
 
-def _field(cache: dict, o) -> ObjectField:
+def cached_field(cache: dict, o) -> ObjectField:
     """The object's exact field (meshes: warp's closest point, as the features stage queries them), built once."""
     key = (repr(o.geometry), o.name)
     if key not in cache:
@@ -235,7 +251,7 @@ class InteractionEnv:
 
     def __init__(self, config: EnvConfig = EnvConfig()):
         self.cfg = config
-        self.slots: list[_Slot] = []
+        self.slots: list[EnvSlot] = []
         self._fields: dict = {}
         self._pool = ThreadPoolExecutor(config.threads) if config.threads > 1 else None
 
@@ -246,13 +262,13 @@ class InteractionEnv:
     def reset(self, assignments: list[tuple]) -> Obs:
         """Start every environment: ``assignments[i] = (episode, scale)`` or ``(episode, scale, variation)`` (a
         :class:`train.mdp.randomize.Variation`); the observation of the first frame."""
-        self.slots = [_Slot(e, s, self.cfg, self._fields, *v) for e, s, *v in assignments]
+        self.slots = [EnvSlot(e, s, self.cfg, self._fields, *v) for e, s, *v in assignments]
         return self.observe()
 
     def reset_one(self, i: int, episode: Episode, scale, variation: Variation | None = None) -> None:
         """Restart environment ``i``; the distance fields no environment uses any more are dropped (with a scale
         or a shape drawn per episode, each restart makes new ones: the cache would grow without end)."""
-        self.slots[i] = _Slot(episode, scale, self.cfg, self._fields, variation)
+        self.slots[i] = EnvSlot(episode, scale, self.cfg, self._fields, variation)
         used = set().union(*(s.field_keys for s in self.slots))
         for key in [k for k in self._fields if k not in used]:
             del self._fields[key]
@@ -277,6 +293,7 @@ class InteractionEnv:
         last = np.stack([s.last_action for s in self.slots])
         target_q, target_v = np.zeros((n, 7)), np.zeros((n, 3))
         pos, vel = np.zeros((n, len(self.cfg.links), 3)), np.zeros((n, len(self.cfg.links), 3))
+        rot = np.zeros((n, len(self.cfg.links), 3, 3))
         groups: dict[int, list[int]] = {}  # the others, by their object set
         by_parts: dict[int, list[int]] = {}  # boxes and chairs, by their number of parts
         for i, s in enumerate(self.slots):
@@ -285,7 +302,7 @@ class InteractionEnv:
             target_q[i], target_v[i] = sim.robot.qpos[j, :7], sim.qvel[j, :3]
             if s.variation is not None:
                 target_q[i] = R.perturb_command(target_q[i], s.variation)
-            pos[i], _, vel[i] = link_state(s.scene.model, s.data, s.ids)
+            pos[i], rot[i], vel[i] = link_state(s.scene.model, s.data, s.ids)
             if s.box_parts is None:
                 groups.setdefault(id(s.fields), []).append(i)
             else:
@@ -300,8 +317,13 @@ class InteractionEnv:
             poses = np.stack([np.stack([_object_pose(self.slots[i], o) for o in slot.objects]) for i in rows])
             near = slot.fields.query_links(pos[rows], poses)
             phi[rows], grad[rows] = near.phi, near.grad
-        df = interaction_features(phi, grad, vel).reshape(n, -1)
-        return Obs(proprioception(qpos, qvel, last), root_command_to(qpos, target_q, target_v), df)
+        command = root_command_to(qpos, target_q, target_v)
+        if self.cfg.contract == "lessmimic_demo":
+            task = np.array([TASK_CONDITION.get(s.episode.task, 0.0) for s in self.slots])
+            df, command = demo_features(phi, grad, rot).reshape(n, -1), demo_command(command, task)
+        else:
+            df = interaction_features(phi, grad, vel).reshape(n, -1)
+        return Obs(proprioception(qpos, qvel, last), command, df)
 
     def meters(self) -> list[TaskMeter]:
         return [s.meter for s in self.slots]
@@ -311,6 +333,6 @@ class InteractionEnv:
             self._pool.shutdown()
 
 
-def _object_pose(slot: _Slot, o) -> np.ndarray:
+def _object_pose(slot: EnvSlot, o) -> np.ndarray:
     adr = slot.scene.object_qpos_adr.get(o.name)
     return slot.data.qpos[adr : adr + 7].copy() if adr is not None else o.pose[0]

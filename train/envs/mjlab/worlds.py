@@ -98,7 +98,7 @@ class Worlds:
     def start(self, env: ManagerBasedRlEnv, ids: torch.Tensor, episode: torch.Tensor, draws: dict) -> None:
         """Worlds ``ids`` start episodes ``episode`` (n,) under ``draws`` (:func:`train.mdp.randomize.draw_batch`, or
         :func:`train.mdp.randomize.stack` of :class:`~train.mdp.randomize.Variation` s): the first state as
-        :class:`train.envs.cpu.env._Slot` builds it, all worlds at once, and the object's model fields."""
+        :class:`train.envs.cpu.env.EnvSlot` builds it, all worlds at once, and the object's model fields."""
         v = {k: torch.as_tensor(a, device=self.device).to(torch.float32) for k, a in draws.items()}
         e = torch.as_tensor(episode, device=self.device)
         dz = self.shapes.floor_shift(e, v["scale"])
