@@ -18,9 +18,10 @@ from pipeline.stage.paths import stage_dir
 from pipeline.terms import layout as L
 from train.actors import PolicyActor
 from train.bc import BCConfig, train_bc
+from train.envs.cpu.env import EnvConfig, InteractionEnv
 from train.evaluation.table2 import EvalConfig, evaluate
-from train.export.demo import DEMO_FILES, DEMO_INPUTS, demo_inputs, export_demo
-from train.export.demo_loop import run_demo_episode
+from train.export.demo import DEMO_FILES, DEMO_INPUTS, demo_inputs, export_demo, viewer_state
+from train.export.demo_loop import DemoLoop, DemoLoopConfig, DemoPolicy, run_demo_episode
 from train.export.metadata import METADATA_KEY, sha256
 from train.export.onnx_policy import export_onnx
 from train.export.parity import parity, recorded_windows
@@ -174,13 +175,21 @@ def test_the_demo_export_has_the_viewers_inputs_and_acts_as_torch(demo_policy, t
     latents = feeds["interaction_field"].reshape(len(want), 5, 64)
     np.testing.assert_allclose(np.linalg.norm(latents, axis=-1), 1.0, atol=1e-5)  # unit latents, newest first
     np.testing.assert_allclose(feeds["proprio"][:, :29], windows[0][:, -1, :29], atol=0)  # newest joint angles first
-    raw = OnnxSession(out / "latent_encoder.onnx").run(["latent"], {"state": windows[2][:, -1]})[0]
+    state = viewer_state(windows[2][:, -1])  # the viewer's order: 7 distances, then 7 x 3 gradients
+    np.testing.assert_array_equal(state[:, :7], windows[2][:, -1, ::4])
+    raw = OnnxSession(out / "latent_encoder.onnx").run(["latent"], {"state": state})[0]
     unit = raw / (np.linalg.norm(raw, axis=-1, keepdims=True) + 1e-8)
     np.testing.assert_allclose(unit, latents[:, 0], atol=1e-5)  # the encoder file gives the policy's latents
     got = OnnxSession(out / "policy.onnx").run(["action"], feeds)[0]
     assert np.abs(got - want).max() <= 1e-5
-    run = run_demo_episode(out, next(e for e in episodes if e.task == "PickUp"), max_steps=5)  # the viewer's loop
-    assert run["steps"] == 5 and run["episode_profile"] == "lessmimic_demo"
+    pickup = next(e for e in episodes if e.task == "PickUp")
+    for cfg in (DemoLoopConfig(), DemoLoopConfig(distance="exact")):  # the viewer's loop, its grids or our field
+        run = run_demo_episode(out, pickup, cfg, max_steps=5)
+        assert run["steps"] == 5 and run["episode_profile"] == "lessmimic_demo"
+    loop = DemoLoop(DemoPolicy(out), pickup)  # its grids read our exact field's features where both are defined
+    env = InteractionEnv(EnvConfig.for_policy(load_policy(checkpoint).layout))
+    env.reset([(pickup, 1.0)])
+    np.testing.assert_allclose(loop.interaction_state(), viewer_state(env.observe().df[0]), atol=0.05)
 
 
 def test_the_demo_export_refuses_other_contracts_gains_and_existing_files(bc_corpus, demo_policy, tmp_path):

@@ -52,15 +52,31 @@ VIEWER_OBJECT_SDFS = {  # the viewer's own scene assets (its example config's pa
 }
 
 
+def viewer_state(df):
+    """The viewer's encoder input ``[7 distances, 7 x 3 gradients]`` (..., 28) of our ``observation.df_demo`` rows,
+    which hold them per body, ``[d, gx, gy, gz]`` x 7 (numpy or torch)."""
+    per_body = df.reshape(*df.shape[:-1], len(LESSMIMIC_DEMO_DF_BODIES), 4)
+    rest = per_body[..., 1:].reshape(*df.shape[:-1], -1)
+    return (
+        torch.cat([per_body[..., 0], rest], -1)
+        if isinstance(df, torch.Tensor)
+        else np.concatenate([per_body[..., 0], rest], -1)
+    )
+
+
 class LatentEncoderGraph(nn.Module):
-    """``state (B, 28)`` raw demo DF -> ``latent (B, 64)``: the VAE's normaliser and encoder mean (not unit-norm)."""
+    """``state (B, 28)``, the viewer's order (distances, then gradients) -> ``latent (B, 64)``: re-ordered per body
+    as our ``observation.df_demo`` is, then the VAE's normaliser and encoder mean (not unit-norm)."""
 
     def __init__(self, policy: InteractionPolicy):
         super().__init__()
         self.vae = policy.vae
+        k = len(LESSMIMIC_DEMO_DF_BODIES)
+        order = [i for b in range(k) for i in (b, k + 3 * b, k + 3 * b + 1, k + 3 * b + 2)]
+        self.register_buffer("order", torch.tensor(order), persistent=False)
 
     def forward(self, state: torch.Tensor) -> torch.Tensor:
-        return self.vae.encode(state)
+        return self.vae.encode(state[:, self.order])
 
 
 class DemoPolicyGraph(nn.Module):

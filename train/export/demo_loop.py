@@ -56,9 +56,11 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.robot import EFFORT_LIMIT, G1_JOINT_NAMES, JOINTS_QPOS, NUM_JOINTS, actuator_profile
 from pipeline.rotations import quat_mat
+from pipeline.terms.interaction import demo_features
 from pipeline.terms.layout import ROOT_HORIZON_S, TASK_CONDITION
 from train.envs.cpu.env import EnvConfig, EnvSlot, cached_field
 from train.episodes import Episode
+from train.export.demo import viewer_state
 from train.export.voxel_field import body_frame, build_grid, query_objects
 from train.mdp.tasks import Rules
 
@@ -90,7 +92,12 @@ class DemoLoopConfig:
     horizon_s: float = ROOT_HORIZON_S
     cone: str = "pyramidal"
     impratio: float = 1.0
+    distance: str = "grid"  # "exact": our exact fields instead of the voxel grids (to measure what the grids cost)
     rules: Rules = field(default_factory=Rules)
+
+    def __post_init__(self):
+        if self.distance not in ("grid", "exact"):
+            raise ValueError(f"distance must be 'grid' or 'exact', got {self.distance!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -309,6 +316,10 @@ class DemoLoop:
     def interaction_state(self) -> np.ndarray:
         """(28,) the encoder's input: the query bodies' distances, then their body-frame gradients (facts 2)."""
         s = self.slot.state
+        if self.cfg.distance == "exact":  # the training environment's field (train.envs.cpu.env.InteractionEnv.observe)
+            near = self.slot.fields.query_links(s.body_pos[None], s.objects[None])
+            rot = np.stack([quat_mat(q) for q in s.body_quat])
+            return viewer_state(demo_features(near.phi[0], near.grad[0], rot, self.cfg.max_distance).reshape(-1))
         d, g = query_objects(self.grids, s.objects, s.body_pos, self.cfg.max_distance)
         return np.concatenate([d, body_frame(g, s.body_quat).reshape(-1)])
 
