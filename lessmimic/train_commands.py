@@ -56,17 +56,14 @@ def _cmd_export(a: argparse.Namespace) -> int:
         sizes = ", ".join(f"{f} {(out / f).stat().st_size / 1e6:.2f} MB" for f in DEMO_FILES)
         print(f"exported {a.policy} in the released demo's contract -> {out}/ ({sizes})")
         return 0
-    from train.export.onnx_policy import export_onnx
+    from train.export.onnx_policy import CHECK_BATCH, export_onnx
 
     r = export_onnx(a.policy, a.out, overwrite=a.overwrite)
     print(
         f"exported {a.policy} -> {r.path} ({r.bytes / 1e6:.2f} MB) in {r.seconds:.1f} s; onnxruntime vs torch "
-        f"{r.check_max_abs:.1e} rad at most on {CHECK_NOTE}"
+        f"{r.check_max_abs:.1e} rad at most on {CHECK_BATCH} observations drawn around the normalisers' statistics"
     )
     return 0
-
-
-CHECK_NOTE = "64 observations drawn around the normalisers' statistics"
 
 
 def _cmd_eval(a: argparse.Namespace) -> int:

@@ -60,14 +60,13 @@ from pipeline.terms.interaction import demo_features
 from pipeline.terms.layout import ROOT_HORIZON_S, TASK_CONDITION
 from train.envs.cpu.env import EnvConfig, EnvSlot, cached_field
 from train.episodes import Episode
-from train.export.demo import viewer_state
+from train.export.demo import ACTION_CLIP, DEMO_FILES, DEMO_PROFILE, JOINT_VEL_SCALE, LATENT, viewer_state
+from train.export.runtime import cpu_session
 from train.export.voxel_field import body_frame, build_grid, query_objects
 from train.mdp.tasks import Rules
 
-CONFIG_FILE, POLICY_FILE, ENCODER_FILE = "interaction_policy.json", "policy.onnx", "latent_encoder.onnx"
-DEMO_PROFILE = "lessmimic_demo"
-QD_SCALE = 0.05  #: joint velocities enter ``proprio`` times this (the export's format)
-LATENT_DIM, LATENT_EPS = 64, 1e-8  #: the latent's width; it is divided by ``|latent| + 1e-8`` (facts 4, runner:290-295)
+CONFIG_FILE, ENCODER_FILE, POLICY_FILE = DEMO_FILES  # the export's files (train.export.demo)
+LATENT_EPS = 1e-8  #: the latent is divided by ``|latent| + 1e-8`` (facts 4, runner:290-295)
 #: The viewer's ``ctrlrange`` per joint (facts 3 "Actuators"): the effort limits, the hip roll at 88 N m (its joint's
 #: 139 N m ``actuatorfrcrange`` never binds).
 CTRL_LIMIT = np.where(["hip_roll" in j for j in G1_JOINT_NAMES], 88.0, EFFORT_LIMIT)
@@ -81,7 +80,7 @@ class DemoLoopConfig:
 
     timestep: float = 0.002
     decimation: int = 10
-    action_clip: float = 10.0
+    action_clip: float = ACTION_CLIP
     joint_damping: float = 0.2
     frictionloss: float = 0.1
     joint_solimplimit: tuple[float, float, float] = (0.97, 0.995, 0.001)
@@ -145,20 +144,12 @@ class DemoExport:
 
 
 class DemoPolicy:
-    """The folder's two ONNX models in onnxruntime (CPU, one thread, all graph optimisations, as the viewer's WASM
-    runtime, facts 1 "Runner details")."""
+    """The folder's two ONNX models in onnxruntime (:func:`train.export.runtime.cpu_session`: CPU, one thread, all
+    graph optimisations, as the viewer's WASM runtime, facts 1 "Runner details")."""
 
     def __init__(self, folder: str | Path, cfg: DemoLoopConfig = DemoLoopConfig()):
-        import onnxruntime as ort
-
         self.export, self.cfg = DemoExport.load(folder, cfg), cfg
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = options.inter_op_num_threads = 1
-        options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-        self.policy, self.encoder = (
-            ort.InferenceSession(str(self.export.folder / f), options, ["CPUExecutionProvider"])
-            for f in (POLICY_FILE, ENCODER_FILE)
-        )
+        self.policy, self.encoder = (cpu_session(self.export.folder / f) for f in (POLICY_FILE, ENCODER_FILE))
         outputs = [o.name for o in self.policy.get_outputs()]
         self.action_output = next((n for n in outputs if "action" in n), outputs[0])  # runner:414-423
 
@@ -302,7 +293,7 @@ class DemoLoop:
             self.grids.append(grids[key])
         h, n = cfg.history, NUM_JOINTS
         self.joints, self.gravity, self.ang_vel = History(h, 2 * n), History(h, 3), History(h, 3)
-        self.actions, self.latents = History(h, n), History(h, LATENT_DIM)
+        self.actions, self.latents = History(h, n), History(h, LATENT)
         self.last_action = np.zeros(n)
         self.condition = np.full((1, 2), TASK_CONDITION[episode.task], np.float32)
         self.prev_target = self.target()
@@ -329,7 +320,7 @@ class DemoLoop:
         target = self.target()
         displacement, self.prev_target = target[:3] - self.prev_target[:3], target
         self.actions.push(self.last_action)  # pushed before inference (runner:325, 430)
-        self.joints.push(np.concatenate([s.q, QD_SCALE * s.qd]))
+        self.joints.push(np.concatenate([s.q, JOINT_VEL_SCALE * s.qd]))
         self.gravity.push(quat_mat(s.root_quat).T @ np.array([0.0, 0.0, -1.0]))
         self.ang_vel.push(s.ang_vel)
         self.latents.push(self.policy.latent(self.interaction_state()))

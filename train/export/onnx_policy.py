@@ -31,6 +31,7 @@ from torch import nn
 from pipeline.errors import InputError
 from pipeline.stage.atomic import write_bytes_atomic
 from train.export.metadata import INPUTS, OUTPUT, metadata_props, policy_metadata
+from train.export.runtime import cpu_session
 from train.policy import InteractionPolicy, load_policy
 
 OPSET = 18
@@ -101,17 +102,6 @@ def onnx_model(policy: InteractionPolicy) -> onnx.ModelProto:
     return quiet_export(ActingGraph(policy.cpu()), check_batch(policy, 2), list(INPUTS), OUTPUT).model_proto
 
 
-def run_onnx(model: onnx.ModelProto | bytes | str | Path, inputs: tuple[np.ndarray, ...]) -> np.ndarray:
-    """One onnxruntime call of an exported policy (CPU, one thread) on ``(proprio, root_command, df)`` windows."""
-    import onnxruntime as ort
-
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = options.inter_op_num_threads = 1
-    src = model.SerializeToString() if isinstance(model, onnx.ModelProto) else model
-    session = ort.InferenceSession(src if isinstance(src, bytes) else str(src), options, ["CPUExecutionProvider"])
-    return session.run([OUTPUT], {k: np.asarray(x, np.float32) for k, x in zip(INPUTS, inputs)})[0]
-
-
 def export_onnx(checkpoint: str | Path, out: str | Path | None = None, overwrite: bool = False) -> ExportReport:
     """Write the ONNX file of the policy at ``checkpoint`` to ``out`` (default: beside it, ``.onnx``); one-line
     :class:`InputError` for an existing ``out`` without ``overwrite``, a file that is not an interaction policy, or
@@ -130,7 +120,8 @@ def export_onnx(checkpoint: str | Path, out: str | Path | None = None, overwrite
     x = check_batch(policy)
     with torch.no_grad():
         want = ActingGraph(policy)(*x).numpy()
-    err = float(np.abs(run_onnx(model, tuple(t.numpy() for t in x)) - want).max())
+    got = cpu_session(model.SerializeToString()).run([OUTPUT], {k: t.numpy() for k, t in zip(INPUTS, x)})[0]
+    err = float(np.abs(got - want).max())
     if not err <= CHECK_TOL:
         raise InputError(checkpoint, "export", f"onnxruntime differs from torch by {err:.2e} rad (> {CHECK_TOL:g})")
     data = model.SerializeToString()

@@ -40,21 +40,27 @@ def read_metadata(path: str | Path) -> dict:
     return meta
 
 
+def cpu_session(model: str | Path | bytes):
+    """An onnxruntime session of ``model`` (a file or its bytes) on the CPU with one thread (the module docstring;
+    onnxruntime's default graph optimisation, all of them, as the released viewer's runtime sets)."""
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = options.inter_op_num_threads = 1
+    return ort.InferenceSession(model if isinstance(model, bytes) else str(model), options, ["CPUExecutionProvider"])
+
+
 class OnnxPolicy:
     """The exported policy at ``path``: ``act`` takes and returns what :meth:`InteractionPolicy.act` does."""
 
     def __init__(self, path: str | Path, expect_layout: PolicyLayout | Mapping | None = None):
-        import onnxruntime as ort
-
         self.path = Path(path)
         self.metadata = read_metadata(path)
         self.layout = PolicyLayout.from_dict(self.metadata["policy"]["layout"])
         self.config = PolicyConfig.from_dict(self.metadata["policy"]["config"])
         if expect_layout is not None and (bad := self.layout.mismatch(expect_layout)) is not None:
             raise InputError(path, *bad)
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = options.inter_op_num_threads = 1
-        self.session = ort.InferenceSession(str(path), options, ["CPUExecutionProvider"])
+        self.session = cpu_session(path)
         names = tuple(i.name for i in self.session.get_inputs())
         if names != INPUTS:
             raise InputError(path, "inputs", f"graph inputs {names}, expected {INPUTS}")
