@@ -4,6 +4,7 @@ the rest of the command line is :mod:`lessmimic.cli`, which registers these with
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from pipeline.errors import InputError
@@ -66,7 +67,37 @@ def _cmd_export(a: argparse.Namespace) -> int:
     return 0
 
 
+def _load_scored(path: str):
+    """The policy an evaluation scores: a checkpoint (MoCap-DF or vision) or its ONNX export (onnxruntime)."""
+    if Path(path).suffix == ".onnx":  # an exported file, run by onnxruntime in the same harness
+        from train.export.runtime import OnnxPolicy
+
+        return OnnxPolicy(path)
+    from train.export.onnx_policy import load_any_policy
+
+    return load_any_policy(path)
+
+
+def _kind(policy) -> str:
+    return "vision" if getattr(policy, "camera", None) is not None else "policy"
+
+
+def _actor(policy, clean_depth: bool):
+    """The evaluation's actor of ``policy``: a vision student's sees its camera through the training sensor model
+    (:class:`train.vision.noise.DepthNoise`) unless ``clean_depth``."""
+    from train.actors import PolicyActor
+
+    if getattr(policy, "camera", None) is None:
+        return PolicyActor(policy)
+    from train.vision.actor import VisionActor
+    from train.vision.noise import DepthNoise
+
+    return VisionActor(policy, DepthNoise.off() if clean_depth else DepthNoise(), seed=0)
+
+
 def _cmd_eval(a: argparse.Namespace) -> int:
+    from dataclasses import replace
+
     import torch
 
     from pipeline.stage.paths import stage_dir
@@ -78,19 +109,21 @@ def _cmd_eval(a: argparse.Namespace) -> int:
     torch.set_num_threads(a.threads)
     episodes = load_episodes(a.name)
     cfg = EvalConfig(seeds=tuple(int(s) for s in a.seeds.split(",")), episodes=a.episodes, envs=a.envs)
-    results = []
+    if a.scales:
+        cfg = replace(cfg, scales=tuple(float(x) for x in a.scales.split(",")))
+    results, scored = [], []  # scored: (actor, label) of the policies whose chains run too
     if a.policy:
-        if Path(a.policy).suffix == ".onnx":  # an exported file, run by onnxruntime in the same harness
-            from train.export.runtime import OnnxPolicy
-
-            policy = OnnxPolicy(a.policy)
-        else:
-            policy = load_policy(a.policy)
+        policy = _load_scored(a.policy)
         # the corpus's links (of the policy's contract) and actuator profile
         want = dataset_layout(stage_dir(a.name, "features"), policy.layout.history, policy.layout.contract)
         if bad := policy.layout.mismatch({"links": want.links, "actuator_profile": want.actuator_profile}):
             raise InputError(a.policy, *bad)
-        results.append(evaluate(PolicyActor(policy), episodes, cfg, f"policy ({Path(a.policy).parent.name})"))
+        scored.append((_actor(policy, a.clean_depth), f"{_kind(policy)} ({Path(a.policy).parent.name})"))
+        teacher = getattr(policy, "teacher", None) or getattr(policy, "metadata", {}).get("teacher")
+        if teacher and Path(teacher["path"]).is_file():  # a vision student: its MoCap teacher in the same run
+            label = f"MoCap teacher ({Path(teacher['path']).parent.name})"
+            scored.append((PolicyActor(load_policy(teacher["path"])), label))
+        results += [evaluate(actor, episodes, cfg, label) for actor, label in scored]
     if a.teacher:
         results.append(evaluate(TeacherActor(), episodes, cfg, "QP teacher, 1.0x reference"))
     if a.demo_loop:  # the released viewer's loop, replicated, on the export in its contract (train/export/demo_loop.py)
@@ -107,14 +140,60 @@ def _cmd_eval(a: argparse.Namespace) -> int:
     note = scale_note(a.name, cfg, a.policy)
     print(write(results, out, note))
     print(markdown(results))
-    if a.chains and a.policy:
+    if a.chains and scored:
         from train.evaluation import chains
 
         lengths = tuple(int(n) for n in a.chains.split(","))
         ccfg = chains.ChainConfig(lengths=lengths, seeds=cfg.seeds, chains=a.chains_per_seed, envs=a.envs)
-        result = chains.evaluate_chains(PolicyActor(policy), episodes, ccfg, f"policy ({Path(a.policy).parent.name})")
-        print(chains.write(result, out, note))
-        print(chains.markdown(result))
+        excluded = getattr(scored[0][0], "excluded_tasks", ())
+        for k, (actor, label) in enumerate(scored):  # the MoCap teacher's chains beside its student's
+            if k and excluded:  # drawn from the student's tasks, so the two rows compare the same chains
+                actor.excluded_tasks = excluded
+                actor.excluded_reason = "left out of the chains to match its vision student's"
+            result = chains.evaluate_chains(actor, episodes, ccfg, label)
+            print(chains.write(result, out if k == 0 else out / "teacher", note))
+            print(chains.markdown(result))
+    return 0
+
+
+def _cmd_distill(a: argparse.Namespace) -> int:
+    import torch
+
+    from pipeline.stage.paths import stage_dir
+    from train.episodes import load_episodes
+    from train.export.metadata import sha256
+    from train.policy import dataset_layout, load_policy
+    from train.vision.distill import DistillConfig, distill, distill_randomization, with_overrides
+
+    torch.set_num_threads(a.threads)
+    teacher = load_policy(a.teacher)
+    want = dataset_layout(stage_dir(a.name, "features"), teacher.layout.history, teacher.layout.contract)
+    if bad := teacher.layout.mismatch({"links": want.links, "actuator_profile": want.actuator_profile}):
+        raise InputError(a.teacher, *bad)
+    cfg = with_overrides(
+        DistillConfig(),
+        iterations=a.iterations,
+        episodes=a.episodes,
+        probe=a.probe,
+        envs=a.envs,
+        fit_steps=a.fit_steps,
+        align=a.align,
+        seed=a.seed,
+    )
+    if a.randomization != "narrow":
+        from dataclasses import replace
+
+        cfg = replace(cfg, randomization=distill_randomization(a.randomization))
+    source = {"path": str(a.teacher), "sha256": sha256(a.teacher), "corpus": a.name}
+    distill(teacher, source, load_episodes(a.name), a.run, cfg, overwrite=a.overwrite)
+    report = json.loads((Path(a.run) / "report.json").read_text())
+    scale, last = report["scale"], report["last"]
+    print(
+        f"distilled {report['policy']} from {a.teacher} in {report['seconds'] / 60:.1f} min: "
+        f"{scale['distill_iterations']} iterations, {scale['episodes']} episodes, {scale['env_steps']} env steps, "
+        f"{scale['windows']} windows; last probe: success {last['student']['success']:.2f}, action RMSE "
+        f"{last['student']['action_rmse']:.3f} rad, R_acc {last['student']['root_accuracy']:.2f}"
+    )
     return 0
 
 
@@ -225,6 +304,36 @@ def add_train(sub) -> None:
     p.add_argument("--threads", type=int, default=1, help="torch threads")
     p.set_defaults(func=_cmd_train_aip)
     p = sub.add_parser(
+        "distill",
+        help="distil a MoCap-DF policy (pi_full) into a vision student on egocentric depth: DAgger under the "
+        "physical and perceptual randomisations (runs/<RUN>/)",
+    )
+    p.add_argument("--name", default="corpus", help="the corpus whose episodes are rolled out (default corpus)")
+    p.add_argument("--teacher", required=True, help="pi_full: a policy checkpoint (runs/<RUN>/policy.pt, .../aip/...)")
+    p.add_argument("--run", default="runs/vision", help="the run folder (default runs/vision); a rerun resumes")
+    p.add_argument("--overwrite", action="store_true", help="start the run afresh")
+    p.add_argument("--iterations", type=int, default=None, help="DAgger iterations (default 12)")
+    p.add_argument("--episodes", type=int, default=None, help="mixture episodes per iteration (default 16)")
+    p.add_argument("--probe", type=int, default=None, help="student-only episodes per iteration (default 8)")
+    p.add_argument("--envs", type=int, default=None, help="environments stepped together (default 8)")
+    p.add_argument("--fit-steps", type=int, default=None, help="Adam steps per refit (default 800)")
+    p.add_argument(
+        "--align",
+        type=float,
+        default=None,
+        help="weight of the latent alignment loss (default 0: the paper's Eq. 8, actions only; > 0: the ablation)",
+    )
+    p.add_argument(
+        "--randomization",
+        default="narrow",
+        choices=("narrow", "full", "off"),
+        help="the physical randomisations: narrow (default: post-training's six, object scale 0.9-1.1, boxes kept), "
+        "full (post-training's: scales 0.4-1.6, cylinders; for a post-trained teacher), off (the sensor's only)",
+    )
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--threads", type=int, default=1)
+    p.set_defaults(func=_cmd_distill)
+    p = sub.add_parser(
         "export", help="a trained policy (runs/<RUN>/policy.pt, any interaction policy) as ONNX with its metadata"
     )
     p.add_argument("--policy", required=True, help="the checkpoint (runs/<RUN>/policy.pt, runs/<RUN>/aip/policy.pt)")
@@ -243,7 +352,10 @@ def add_train(sub) -> None:
     p.set_defaults(func=_cmd_export)
     p = sub.add_parser("eval", help="the paper's Table 2 evaluation of a policy and/or the QP teacher baseline")
     p.add_argument(
-        "--policy", default=None, help="a policy checkpoint (runs/<RUN>/policy.pt) or its ONNX export (.onnx)"
+        "--policy",
+        default=None,
+        help="a policy checkpoint (runs/<RUN>/policy.pt) or its ONNX export (.onnx); a vision student's is scored "
+        "with its MoCap teacher in the same run",
     )
     p.add_argument("--teacher", action="store_true", help="also score the QP teacher tracking the 1.0x reference")
     p.add_argument(
@@ -268,4 +380,6 @@ def add_train(sub) -> None:
     )
     p.add_argument("--chains-per-seed", type=int, default=4, help="chains per length and seed (default 4)")
     p.add_argument("--out", default=None, help="output folder (default: the policy's run folder /eval)")
+    p.add_argument("--scales", default="", help="only these object scales of Table 2, e.g. 1.0 (default: all)")
+    p.add_argument("--clean-depth", action="store_true", help="a vision policy's camera without the sensor noise model")
     p.set_defaults(func=_cmd_eval)

@@ -41,6 +41,22 @@ def test_a_relocated_episode_starts_where_asked_and_keeps_its_object_where_it_wa
     np.testing.assert_allclose(gap, np.linalg.norm(e.reference.qpos[:, :2] - q0[:, :2], axis=1), atol=1e-9)
 
 
+def test_r_acc_measures_against_the_relocated_reference(corpus):
+    """In a chain the commanded trajectory is the relocated episode's: at its recorded state the root is on it, 10 m
+    from where the original episode's root was."""
+    episodes, _ = corpus
+    e = next(x for x in episodes if x.task == "PickUp")
+    r = relocated(
+        e, e.simulated.robot.qpos[0, 0] + 10.0, e.simulated.robot.qpos[0, 1], heading_yaw(e.simulated.robot.qpos[0])
+    )
+    env = InteractionEnv()
+    env.reset([(r, 1.0)])
+    slot, t = env.slots[0], 5
+    slot.set_state(r.simulated.robot.qpos[t], r.simulated.qvel[t])
+    assert slot.facts(t).root_dev_m == pytest.approx(0.0, abs=1e-9)
+    assert np.linalg.norm(slot.data.qpos[:2] - e.simulated.robot.qpos[t, :2]) > 9.0
+
+
 def test_a_chain_goes_on_from_the_robots_state_into_the_next_task(corpus):
     """Switching to the next task keeps the robot's state and places the next episode where the robot stands."""
     from train.evaluation.chains import _switch
@@ -70,9 +86,34 @@ def test_chain_results_per_length_say_how_each_chain_ended(corpus):
         c = result["lengths"][n]
         assert sum(c["ended"].values()) == 4 and set(c["ended"]) == set(ENDINGS)
         assert 0 <= c["mean"] <= 1 and 0 <= c["mean_tasks_completed"] <= int(n) and len(c["per_seed"]) == 2
-    assert "| smoke |" in markdown(result) and "N = 2" in markdown(result)
+        assert 0 <= c["root_accuracy"] <= 1
+    assert result["tasks"] == sorted({e.task for e in episodes}) and "not_applicable" not in result
+    assert "| smoke |" in markdown(result) and "N = 2" in markdown(result) and ", R_acc " in markdown(result)
     outcome = run_chains(PolicyActor(load_policy(policy)), [[episodes[0]]], cfg)
     assert outcome[0]["tasks_completed"] == int(outcome[0]["success"])
+    assert outcome[0]["ended"] != "strayed" or outcome[0]["root_accuracy"] < 1.0
+
+
+class _NoSitting(PolicyActor):
+    excluded_tasks = ("SitStand",)
+    excluded_reason = "the seat is behind the robot"
+
+
+def test_a_vision_policys_chains_leave_out_the_tasks_it_excludes(corpus, tmp_path):
+    from train.evaluation.chains import write
+
+    episodes, policy = corpus
+    cfg = ChainConfig(lengths=(2,), seeds=(0,), chains=2, envs=2)
+    result = evaluate_chains(_NoSitting(load_policy(policy)), episodes, cfg, "vision")
+    assert result["tasks"] == sorted({e.task for e in episodes} - {"SitStand"})
+    assert result["not_applicable"] == [{"task": "SitStand", "reason": "the seat is behind the robot"}]
+    write(result, tmp_path, {})
+    head = (tmp_path / "chains.md").read_text().splitlines()[0]
+    assert f"tasks drawn from {', '.join(result['tasks'])}." in head and "SitStand not applicable" in head
+    old = {"label": "old", "lengths": {"5": {"mean": 0.5, "std": 0.0, "ci95": [0.2, 0.8], "mean_tasks_completed": 3.0}}}
+    assert markdown(old).splitlines()[2] == "| old | 50.0 (20-80), 3.0 tasks |"  # written before R_acc
+    with pytest.raises(ValueError, match="no episode of a task the actor attempts"):
+        evaluate_chains(_NoSitting(load_policy(policy)), [e for e in episodes if e.task == "SitStand"], cfg)
 
 
 def test_the_eval_command_adds_the_chains_table(corpus, tmp_path):

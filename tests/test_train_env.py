@@ -149,6 +149,54 @@ def test_scaled_objects_rest_on_the_floor_and_the_command_does_not_change(corpus
         env.reset_one(0, corpus[0], 2.0)
 
 
+def test_the_root_deviation_is_horizontal_to_the_reference_at_the_same_frame(corpus):
+    """R_acc's distance (StepFacts.root_dev_m): 0 at the recorded state even with the root 0.2 m lower (a sit on a
+    scaled chair), the horizontal offset otherwise; the meter divides by the episode's full length."""
+    episode = corpus[0]
+    env = InteractionEnv()
+    env.reset([(episode, 1.0)])
+    slot, sim = env.slots[0], episode.simulated
+    assert slot.meter.root_total == sim.frames - 1
+    t = sim.frames // 2
+    q = sim.robot.qpos[t].copy()
+    q[2] -= 0.2
+    slot.set_state(q, sim.qvel[t])
+    assert slot.facts(t).root_dev_m == 0.0
+    q[:2] += (0.3, 0.4)
+    slot.set_state(q, sim.qvel[t])
+    assert slot.facts(t).root_dev_m == pytest.approx(0.5)
+
+
+class _NoSitting(TeacherActor):
+    """The teacher standing in for a vision policy: it does not attempt SitStand."""
+
+    excluded_tasks = ("SitStand",)
+    excluded_reason = "the seat is behind the robot: not in the egocentric camera's view"
+
+
+def test_an_actor_that_excludes_a_task_gets_n_a_cells_and_the_reason(corpus):
+    cfg = EvalConfig(seeds=(0,), episodes=1, tasks=("PickUp", "SitStand"), scales=(1.0,))
+    result = evaluate(_NoSitting(), corpus, cfg, "vision")
+    assert set(result["cells"]) == {"PickUp@1"}
+    assert result["not_applicable"] == [{"task": "SitStand", "reason": _NoSitting.excluded_reason}]
+    success, accuracy = (line.split(" | ") for line in markdown([result]).splitlines()[2:4])
+    assert success[1:4] == ["-", "-", "100.0 (21-100)"] and success[6:9] == ["n/a"] * 3 and success[9] == "-"
+    assert accuracy[0] == "| vision: R_acc" and accuracy[6:9] == ["n/a"] * 3
+    assert float(accuracy[3]) == pytest.approx(100 * result["cells"]["PickUp@1"]["root_accuracy"], abs=0.05)
+    _NoSitting.excluded_tasks = ("Dance",)
+    try:
+        with pytest.raises(ValueError, match="unknown task"):
+            evaluate(_NoSitting(), corpus, cfg)
+    finally:
+        _NoSitting.excluded_tasks = ("SitStand",)
+
+
+def test_results_written_before_r_acc_still_read():
+    cell = {"task": "PickUp", "scale": 1.0, "mean": 0.5, "std": 0.1, "ci95": [0.3, 0.7]}
+    lines = markdown([{"label": "old", "cells": {"PickUp@1": cell}}]).splitlines()
+    assert len(lines) == 3 and lines[2].split(" | ")[3] == "50.0 (30-70)"
+
+
 def test_a_cells_interval_is_wilsons_for_successes_and_students_t_for_contact_rates():
     low, high = interval95([1.0] * 30 + [0.0] * 18, binary=True)  # 30 of 48
     assert np.isclose(low, 0.4836, atol=1e-4) and np.isclose(high, 0.7478, atol=1e-4)
@@ -175,8 +223,12 @@ def test_the_evaluation_harness_scores_the_teacher(corpus, tmp_path):
         "Push@1.4",
     }
     assert cells["PickUp@1"]["mean"] == 1.0 and cells["Push@1"]["mean"] > 0.9
-    row = markdown([result]).splitlines()[2].split(" | ")
+    assert cells["PickUp@1"]["root_accuracy"] > 0.9 and cells["Push@1"]["root_accuracy"] > 0.9  # tracks the root
+    assert all(c["root_accuracy"] < 1.0 for c in cells.values() if c["falls"])  # a fall cuts the steps on the track
+    table = markdown([result]).splitlines()
+    row = table[2].split(" | ")
     assert row[0] == "| teacher" and row[3] == "100.0 (21-100)" and row[6:9] == ["-", "-", "-"]  # PickUp 1.0 (1 of 1)
+    assert table[3].startswith("| teacher: R_acc | ") and "not_applicable" not in result
     assert cells["PickUp@1"]["episodes"] == 1 and cells["PickUp@1"]["ci95"][1] == 1.0
     note = scale_note("train", EvalConfig(seeds=(0,), episodes=1), tmp_path / "p.pt")  # no report.json beside it
     assert note["policy"]["training_scale"] == "unknown"

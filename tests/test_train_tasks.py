@@ -1,5 +1,5 @@
 """The paper's success rules (App. "Evaluation Metrics") on hand-made step sequences: each rule passes at its
-threshold and fails just short of it."""
+threshold and fails just short of it; R_acc on a hand-made trajectory."""
 
 import numpy as np
 import pytest
@@ -15,6 +15,7 @@ def facts(**kw) -> StepFacts:
         object_pos=np.zeros(3),
         object_ref=np.zeros(3),
         root_z=0.75,
+        root_dev_m=0.0,
         pelvis_on_object=False,
         hand_on_object=False,
         body_on_object=False,
@@ -102,3 +103,29 @@ def test_push_rate_counts_the_pushing_frames_after_a_fall_as_without_contact():
 def test_unknown_task_is_refused():
     with pytest.raises(ValueError, match="unknown task"):
         TaskMeter("Dance", FPS)
+
+
+def test_r_acc_on_a_hand_made_trajectory():
+    """The commanded root walks along x at 1 m/s; the root follows it but drifts sideways 1 cm per step (and crouches,
+    which the horizontal distance ignores): on the track (<= 0.6 m) for steps 1..60 of 100, so R_acc = 0.6."""
+    t = np.arange(1, 101)
+    command = np.column_stack([t / FPS, np.zeros(100), np.full(100, 0.75)])
+    root = np.column_stack([t / FPS, 0.01 * t, np.linspace(0.75, 0.45, 100)])
+    steps = [facts(root_z=r[2], root_dev_m=float(np.linalg.norm(r[:2] - c[:2]))) for r, c in zip(root, command)]
+    meter = TaskMeter("PickUp", FPS, root_total=100)
+    for f in steps:
+        meter.update(f)
+    assert meter.root_within == 60 and meter.summary()["root_accuracy"] == pytest.approx(0.6)
+    assert Rules().root_tolerance_m == 0.6
+
+
+def test_r_acc_counts_the_steps_a_fall_cut_off_as_off_the_track():
+    """A policy on the track until it falls at step 10 of a 100-step episode scores 10%, not 100%."""
+    meter = TaskMeter("Push", FPS, root_total=100)
+    for f in [facts(root_dev_m=0.1)] * 10:
+        meter.update(f)
+    assert meter.root_accuracy == pytest.approx(0.1)
+    unbounded = TaskMeter("Push", FPS)  # without the episode's length: the steps run
+    for f in [facts(root_dev_m=0.6)] * 3 + [facts(root_dev_m=0.61)]:
+        unbounded.update(f)
+    assert unbounded.root_accuracy == pytest.approx(0.75) and TaskMeter("Push", FPS).root_accuracy == 0.0

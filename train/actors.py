@@ -12,6 +12,17 @@ from train.envs.cpu.env import EnvConfig, History, InteractionEnv, Obs
 from train.teacher import Teacher, episode_reference
 
 
+def check_profile(env: InteractionEnv, want: str) -> None:
+    """Every environment's episode physicalized under the actuator profile ``want`` the policy acts for."""
+    for s in env.slots:
+        if s.episode.profile != want:
+            raise InputError(
+                s.episode.simulated.robot.source,
+                "actuator_profile",
+                f"episode physicalized under {s.episode.profile!r}, the policy acts for {want!r}",
+            )
+
+
 class PolicyActor:
     """A trained :class:`train.policy.InteractionPolicy` acting on its observation history."""
 
@@ -24,14 +35,7 @@ class PolicyActor:
         return EnvConfig.for_policy(self.policy.layout, **kw)
 
     def reset(self, env: InteractionEnv) -> None:
-        want = self.policy.layout.actuator_profile
-        for s in env.slots:
-            if s.episode.profile != want:
-                raise InputError(
-                    s.episode.simulated.robot.source,
-                    "actuator_profile",
-                    f"episode physicalized under {s.episode.profile!r}, the policy acts for {want!r}",
-                )
+        check_profile(env, self.policy.layout.actuator_profile)
         self.history.reset(env.observe())
 
     def observe(self, obs: Obs) -> None:

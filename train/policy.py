@@ -278,6 +278,14 @@ def load_policy(
         ckpt = torch.load(Path(path), map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - any unreadable file is a one-line input error
         raise InputError(path, "format", f"not a torch checkpoint ({type(exc).__name__})") from None
+    return policy_from_checkpoint(ckpt, path, expect_layout).to(device).eval()
+
+
+def policy_from_checkpoint(
+    ckpt, path: str | Path, expect_layout: PolicyLayout | Mapping | None = None
+) -> InteractionPolicy:
+    """The policy of a loaded checkpoint dict (:meth:`InteractionPolicy.to_checkpoint`; another stage's checkpoint may
+    nest one, as the vision student does its control head), checked as :func:`load_policy` says."""
     if not isinstance(ckpt, dict) or ckpt.get("format") != POLICY_FORMAT:
         raise InputError(path, "format", f"not an interaction policy checkpoint (expected format {POLICY_FORMAT!r})")
     try:
@@ -294,7 +302,7 @@ def load_policy(
         policy.backbone.load_state_dict(ckpt["backbone"])
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:
         raise InputError(path, "backbone", f"unreadable policy weights ({type(exc).__name__})") from None
-    return policy.to(device).eval()
+    return policy
 
 
 def mean_policy(paths: list[str | Path], device: str | torch.device = "cpu") -> InteractionPolicy:

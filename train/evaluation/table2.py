@@ -9,6 +9,15 @@ over all its episodes, with its 95% interval (:func:`interval95`), and the stand
 same harness scores the student policy and the QP teacher tracking the fixed 1.0x reference (the paper's
 reference-based rows). Every result names its scale: episodes, seeds and what was scored (checkpoint and its
 training figures), so a CPU smoke number is never mistaken for a full one.
+
+Every cell also reports ``root_accuracy``, ``R_acc`` (:attr:`train.mdp.tasks.TaskMeter.root_accuracy`: the share of
+an episode's control steps with the root within 0.6 m of the commanded root trajectory), the mean over the cell's
+episodes pooled over the seeds (each episode weighs the same, as each success does).
+
+An actor may declare ``excluded_tasks`` (a tuple of task names) and ``excluded_reason`` (a sentence) as attributes,
+e.g. a vision policy, whose egocentric camera does not see the seat behind it, excludes SitStand
+(:func:`not_applicable`). Those tasks' cells are not run; the result records them under ``"not_applicable"`` and the
+table shows them ``n/a``, distinct from ``-`` (a cell this evaluation did not run).
 """
 
 from __future__ import annotations
@@ -71,11 +80,26 @@ def _run(actor, batch: list[Episode], scale: float, rng: np.random.Generator, cf
     return [{**m.summary(), "fell": s.fell} for m, s in zip(env.meters(), env.slots)]
 
 
+def not_applicable(actor) -> dict[str, str]:
+    """The tasks ``actor`` does not attempt, each with the actor's reason: its ``excluded_tasks`` attribute (absent:
+    none) and ``excluded_reason`` (absent: a generic one). An unknown task name is an error, not a silent no-op."""
+    tasks = tuple(getattr(actor, "excluded_tasks", ()))
+    if unknown := [t for t in tasks if t not in TASKS]:
+        raise ValueError(f"excluded_tasks: unknown task(s) {unknown}; known: {TASKS}")
+    reason = getattr(actor, "excluded_reason", "") or "not applicable to this actor"
+    return {t: reason for t in tasks}
+
+
 def evaluate(actor, episodes: list[Episode], cfg: EvalConfig = EvalConfig(), label: str = "") -> dict:
-    """The Table 2 results of ``actor`` on the corpus ``episodes`` (module docstring)."""
-    by_task = {t: [e for e in episodes if e.task == t] for t in cfg.tasks}
-    cells = [(t, s) for t in cfg.tasks for s in TABLE2[t] if by_task[t] and (cfg.scales is None or s in cfg.scales)]
+    """The Table 2 results of ``actor`` on the corpus ``episodes`` (module docstring); the tasks the actor excludes
+    are listed, with its reason, as ``"not_applicable": [{"task", "reason"}]`` (only when there are some)."""
+    excluded = not_applicable(actor)
+    tasks = [t for t in cfg.tasks if t not in excluded]
+    by_task = {t: [e for e in episodes if e.task == t] for t in tasks}
+    cells = [(t, s) for t in tasks for s in TABLE2[t] if by_task[t] and (cfg.scales is None or s in cfg.scales)]
     out = {"label": label, "config": asdict(cfg), "cells": {}}
+    if excluded:
+        out["not_applicable"] = [{"task": t, "reason": why} for t, why in excluded.items()]
     for task, scale in tqdm(cells, desc=f"eval {label}", unit="cell"):
         outcomes = []
         for seed in cfg.seeds:
@@ -95,7 +119,8 @@ def evaluate(actor, episodes: list[Episode], cfg: EvalConfig = EvalConfig(), lab
 def summarize_cell(task: str, scale: float, runs_per_seed: list[list[dict]], seeds) -> dict:
     """A cell of Table 2 from its episodes' outcomes, one list per evaluation seed (each outcome a
     :meth:`train.mdp.tasks.TaskMeter.summary` plus ``fell``): the mean over seeds of the success rate (Push: the
-    contact rate), its spread over seeds, the 95% interval over every episode (:func:`interval95`), falls, length."""
+    contact rate), its spread over seeds, the 95% interval over every episode (:func:`interval95`), falls, length,
+    and the mean ``root_accuracy`` (R_acc) over every episode."""
     key = "contact_rate" if task == "Push" else "success"
     per_seed = [float(np.mean([r[key] for r in runs])) for runs in runs_per_seed]
     outcomes = [r for runs in runs_per_seed for r in runs]
@@ -113,6 +138,7 @@ def summarize_cell(task: str, scale: float, runs_per_seed: list[list[dict]], see
         "seeds": list(seeds),
         "falls": int(sum(r["fell"] for r in outcomes)),
         "mean_steps": float(np.mean([r["steps"] for r in outcomes])),
+        "root_accuracy": float(np.mean([r["root_accuracy"] for r in outcomes])),
     }
 
 
@@ -140,17 +166,33 @@ def _seated(outcomes: list[dict], cfg: EvalConfig) -> dict:
 
 
 def markdown(results: list[dict]) -> str:
-    """The Table 2 layout, one row per result: the mean and its 95% interval, in %."""
+    """The Table 2 layout, two rows per result: its success (the mean and its 95% interval, in %, :func:`cell_text`),
+    then ``<label>: R_acc``, each cell's mean root tracking accuracy in %. A row of its own rather than a figure in
+    each cell (or one mean per row): the cells stay short enough to read across twelve columns, R_acc lines up under
+    the success it belongs to, and rows that ran different cells (vision: no SitStand) are compared cell by cell,
+    which a row mean would not do. ``n/a``: a task the actor excludes (the reason is in its result); ``-``: a cell
+    not run. A result written before R_acc (no cell has ``root_accuracy``) has no R_acc row."""
     cols = [(t, s) for t in TASKS for s in TABLE2[t]]
     head = "| | " + " | ".join(f"{t} {s:g}" for t, s in cols) + " |"
     lines = [head, "|---" * (len(cols) + 1) + "|"]
     for r in results:
-        cells = []
-        for t, s in cols:
-            c = r["cells"].get(f"{t}@{s:g}")
-            cells.append("-" if c is None else cell_text(c))
-        lines.append(f"| {r['label']} | " + " | ".join(cells) + " |")
+        na = {x["task"] for x in r.get("not_applicable", ())}
+        found = [(t, r["cells"].get(f"{t}@{s:g}")) for t, s in cols]
+        lines.append(_row(r["label"], found, na, cell_text))
+        if any(c is not None and "root_accuracy" in c for _, c in found):
+            lines.append(_row(f"{r['label']}: R_acc", found, na, accuracy_text))
     return "\n".join(lines) + "\n"
+
+
+def _row(label: str, found: list[tuple[str, dict | None]], na: set[str], text) -> str:
+    """One markdown row: ``text(cell)`` per ``(task, cell)``, ``n/a`` for the tasks in ``na``, ``-`` for no cell."""
+    cells = ["n/a" if t in na else "-" if c is None else text(c) for t, c in found]
+    return f"| {label} | " + " | ".join(cells) + " |"
+
+
+def accuracy_text(c: dict) -> str:
+    """A cell's (or a chain length's) ``root_accuracy`` in %; ``-`` when it has none (written before R_acc)."""
+    return f"{100 * c['root_accuracy']:.1f}" if "root_accuracy" in c else "-"
 
 
 def cell_text(c: dict) -> str:
@@ -191,7 +233,10 @@ def scale_line(note: dict) -> str:
     line = (
         f"Scale: corpus `{note['corpus']}`, {note['episodes_per_cell_and_seed']} episodes per cell and seed, "
         f"seeds {', '.join(map(str, note['seeds']))}; success in % (Push: hand contact rate) over every episode of a "
-        "cell, with its 95% interval in brackets (Wilson; Push: Student's t over episodes)."
+        "cell, with its 95% interval in brackets (Wilson; Push: Student's t over episodes); R_acc: the share of "
+        "control steps with the root within 0.6 m (horizontally) of the commanded root trajectory, the steps a fall "
+        "cut off counting as off it, in % averaged over a cell's episodes; n/a: a task the actor does not attempt "
+        "(why: eval.json)."
     )
     policy = note.get("policy")
     if policy:
@@ -203,6 +248,8 @@ def scale_line(note: dict) -> str:
             f"({s['bc_samples']} samples), DAgger {s['dagger_iterations']} iterations x "
             f"{s['dagger_episodes_per_iteration']} episodes ({s['dagger_windows']} windows), on {s['device']}"
             if "corpus_episodes" in s
+            else distilled_text(s)
+            if "distill_iterations" in s
             else "unknown (no report.json beside it)"
         )
         post = s.get("post_training")
@@ -213,6 +260,15 @@ def scale_line(note: dict) -> str:
             )
         line += f" Policy `{policy['checkpoint']}`, trained on {trained}."
     return line
+
+
+def distilled_text(s: dict) -> str:
+    """A vision student's training scale (:func:`train.vision.distill.report`), in words."""
+    return (
+        f"a distillation from `{s['teacher']}`: {s['distill_iterations']} DAgger iterations, {s['episodes']} episodes "
+        f"({s['env_steps']} env steps), {s['windows']} windows, refits of {s['fit_steps_per_iteration']} x "
+        f"{s['batch']}, latent alignment weight {s['align']:g}, on {s['device']}"
+    )
 
 
 def plot(results: list[dict], path: Path) -> None:

@@ -23,6 +23,7 @@ from pipeline.terms import layout as L
 METADATA_KEY = "lessmimic"
 EXPORT_FORMAT = "lessmimic.onnx_policy/1"
 INPUTS = ("proprio", "root_command", "df")
+VISION_INPUTS = ("proprio", "root_command", "depth")  # a vision student's (train.vision.student)
 OUTPUT = "joint_targets"
 
 TERM_MEANING = {
@@ -42,6 +43,27 @@ DEMO_TERM_MEANING = {  # the released demo's contract (pipeline.terms.layout.CON
     "df": "per step and query body: min(|phi|, 1 m) of the nearest object's unsigned distance, its gradient (3) in "
     "the body's own frame, zero beyond 1 m",
 }
+
+
+def inputs_of(policy) -> tuple[str, str, str]:
+    """The graph inputs of ``policy``: a vision student's (it has a camera) or a MoCap-DF policy's."""
+    return VISION_INPUTS if getattr(policy, "camera", None) is not None else INPUTS
+
+
+def camera_metadata(camera) -> dict:
+    """A :class:`train.vision.camera.DepthCamera`'s intrinsics, extrinsics and range, as a robot stack sets its own."""
+    fx, fy = camera.focal
+    return {
+        "config": asdict(camera),
+        "intrinsics": {"width": camera.width, "height": camera.height, "fx": fx, "fy": fy,
+                       "cx": camera.width / 2, "cy": camera.height / 2, "fov_x_deg": camera.fov_x_deg,
+                       "fov_y_deg": camera.fov_y_deg},
+        "extrinsics": {"body": camera.body, "pos_m": list(camera.pos), "rpy_rad": [0.0, camera.pitch, 0.0],
+                       "convention": "in the body's frame: x forward, y left, z up (ROS); the optical axis is the "
+                       "body x pitched down by rpy[1]; image right -y, image down -z"},
+        "depth": {"kind": "z-depth along the optical axis [m], row-major (height, width), row 0 at the top",
+                  "range_m": [camera.near, camera.far], "no_hit": camera.far, "invalid": 0.0},
+    }  # fmt: skip
 
 
 def sha256(path: str | Path) -> str:
@@ -65,7 +87,14 @@ def policy_metadata(policy, checkpoint: str | Path) -> dict:
         "df": list(L.feature_names(lay.links, parts)),
     }
     meaning = {**TERM_MEANING, **(DEMO_TERM_MEANING if demo else {})}
-    dims = dict(zip(INPUTS, obs.step_dims))
+    inputs = inputs_of(policy)
+    shapes = {k: [dim] for k, dim in zip(INPUTS, obs.step_dims)}
+    camera = None
+    if inputs == VISION_INPUTS:  # the vision student reads depth frames in place of the DF
+        cam = policy.camera
+        camera = camera_metadata(cam)
+        shapes["depth"], names["depth"] = [cam.height, cam.width], []
+        meaning["depth"] = "per step: the depth frame of the camera (metadata camera): " + camera["depth"]["kind"]
     return {
         "format": EXPORT_FORMAT,
         "checkpoint": {"file": Path(checkpoint).name, "sha256": sha256(checkpoint)},
@@ -93,14 +122,16 @@ def policy_metadata(policy, checkpoint: str | Path) -> dict:
             "order": "each input is (batch, history, width): oldest step first, newest last; before an episode's "
             "first step, that step is repeated",
             "inputs": {
-                k: {"shape": ["batch", lay.history, dims[k]], "names": names[k], "meaning": meaning[k]} for k in INPUTS
+                k: {"shape": ["batch", lay.history, *shapes[k]], "names": names[k], "meaning": meaning[k]}
+                for k in inputs
             },
             "df_links": list(lay.links),
             "df_column": column,
             "contract": lay.contract,
         },
-        "camera": None,
+        "camera": camera,
         "policy": {"config": asdict(cfg), "layout": lay.to_dict()},
+        **({"teacher": policy.teacher} if camera is not None else {}),
     }
 
 

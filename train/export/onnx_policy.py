@@ -8,7 +8,9 @@ with the normalisers, the frozen VAE encoder and the backbone inside (:class:`Ac
 :data:`~train.export.metadata.INPUTS`, each ``(batch, history, width)``, the batch dynamic). It is exported with
 torch's dynamo exporter (``torch.onnx.export(dynamo=True)``, opset :data:`OPSET`: the maintained path, the
 TorchScript exporter being deprecated), and its contract (:func:`train.export.metadata.policy_metadata`) goes into
-the model's ``metadata_props``. Any interaction policy checkpoint exports: BC + DAgger, post-trained, an averaged one.
+the model's ``metadata_props``. Any interaction policy checkpoint exports: BC + DAgger, post-trained, an averaged one,
+and a vision student (inputs :data:`~train.export.metadata.VISION_INPUTS`, depth frames ``(batch, history, H, W)``,
+its camera's intrinsics and extrinsics in the metadata).
 
 Before anything is written the file is checked: onnxruntime and torch act on :data:`CHECK_BATCH` observations drawn
 around the normalisers' statistics and must agree within :data:`CHECK_TOL` (a wrong graph, not float rounding, is
@@ -30,7 +32,7 @@ from torch import nn
 
 from pipeline.errors import InputError
 from pipeline.stage.atomic import write_bytes_atomic
-from train.export.metadata import INPUTS, OUTPUT, metadata_props, policy_metadata
+from train.export.metadata import OUTPUT, inputs_of, metadata_props, policy_metadata
 from train.export.runtime import cpu_session
 from train.policy import InteractionPolicy, load_policy
 
@@ -40,14 +42,15 @@ CHECK_TOL = 1e-4
 
 
 class ActingGraph(nn.Module):
-    """``(proprio, root_command, df)`` raw windows -> raw joint targets: :meth:`InteractionPolicy.act` as a module."""
+    """``(proprio, root_command, df)`` raw windows -> raw joint targets: :meth:`InteractionPolicy.act` as a module
+    (a vision student's: ``(proprio, root_command, depth)``, :class:`train.vision.student.VisionPolicy`)."""
 
     def __init__(self, policy: InteractionPolicy):
         super().__init__()
         self.policy = policy.eval()
 
-    def forward(self, proprio: torch.Tensor, root_command: torch.Tensor, df: torch.Tensor) -> torch.Tensor:
-        return self.policy.norm["action"].denormalize(self.policy(proprio, root_command, df))
+    def forward(self, proprio: torch.Tensor, root_command: torch.Tensor, third: torch.Tensor) -> torch.Tensor:
+        return self.policy.norm["action"].denormalize(self.policy(proprio, root_command, third))
 
 
 @dataclass(frozen=True)
@@ -67,14 +70,28 @@ def check_finite(policy: InteractionPolicy, checkpoint: str | Path) -> None:
 
 
 def check_batch(policy: InteractionPolicy, n: int = CHECK_BATCH, seed: int = 0) -> tuple[torch.Tensor, ...]:
-    """``n`` observation windows drawn as ``mean + std * N(0, 1)`` of each input's normaliser (the VAE's for df)."""
+    """``n`` observation windows drawn as ``mean + std * N(0, 1)`` of each input's normaliser (the VAE's for df); a
+    vision student's depth frames uniform in its camera's range."""
     g = torch.Generator().manual_seed(seed)
     lay = policy.layout
-    norms = (policy.norm["proprio"], policy.norm["root_command"], policy.vae.norm)
-    return tuple(
+    dims = lay.observation.step_dims[:2]
+    drawn = tuple(
         nm.mean.cpu() + nm.std.cpu() * torch.randn(n, lay.history, d, generator=g)
-        for nm, d in zip(norms, lay.observation.step_dims)
+        for nm, d in zip((policy.norm["proprio"], policy.norm["root_command"]), dims)
     )
+    cam = getattr(policy, "camera", None)
+    if cam is not None:
+        depth = cam.near + (cam.far - cam.near) * torch.rand(n, lay.history, cam.height, cam.width, generator=g)
+        return (*drawn, depth)
+    vae = policy.vae.norm
+    return (*drawn, vae.mean.cpu() + vae.std.cpu() * torch.randn(n, lay.history, lay.df_dim, generator=g))
+
+
+def load_any_policy(checkpoint: str | Path):
+    """The MoCap-DF policy or the vision student saved at ``checkpoint`` (one-line errors for anything else)."""
+    from train.vision.student import is_vision_checkpoint, load_vision_policy
+
+    return load_vision_policy(checkpoint) if is_vision_checkpoint(checkpoint) else load_policy(checkpoint)
 
 
 def quiet_export(graph: nn.Module, example: tuple, inputs: list[str], output: str, opset: int = OPSET):
@@ -99,7 +116,7 @@ def quiet_export(graph: nn.Module, example: tuple, inputs: list[str], output: st
 
 def onnx_model(policy: InteractionPolicy) -> onnx.ModelProto:
     """The policy's acting graph as an ONNX model (no metadata yet)."""
-    return quiet_export(ActingGraph(policy.cpu()), check_batch(policy, 2), list(INPUTS), OUTPUT).model_proto
+    return quiet_export(ActingGraph(policy.cpu()), check_batch(policy, 2), list(inputs_of(policy)), OUTPUT).model_proto
 
 
 def export_onnx(checkpoint: str | Path, out: str | Path | None = None, overwrite: bool = False) -> ExportReport:
@@ -111,7 +128,7 @@ def export_onnx(checkpoint: str | Path, out: str | Path | None = None, overwrite
     out = Path(out) if out is not None else checkpoint.with_suffix(".onnx")
     if out.exists() and not overwrite:
         raise InputError(out, "output", "exists: pass --overwrite to replace it")
-    policy = load_policy(checkpoint)
+    policy = load_any_policy(checkpoint)
     check_finite(policy, checkpoint)
     model = onnx_model(policy)
     for key, value in metadata_props(policy_metadata(policy, checkpoint)).items():
@@ -120,7 +137,8 @@ def export_onnx(checkpoint: str | Path, out: str | Path | None = None, overwrite
     x = check_batch(policy)
     with torch.no_grad():
         want = ActingGraph(policy)(*x).numpy()
-    got = cpu_session(model.SerializeToString()).run([OUTPUT], {k: t.numpy() for k, t in zip(INPUTS, x)})[0]
+    feed = {k: t.numpy() for k, t in zip(inputs_of(policy), x)}
+    got = cpu_session(model.SerializeToString()).run([OUTPUT], feed)[0]
     err = float(np.abs(got - want).max())
     if not err <= CHECK_TOL:
         raise InputError(checkpoint, "export", f"onnxruntime differs from torch by {err:.2e} rad (> {CHECK_TOL:g})")

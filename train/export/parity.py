@@ -17,30 +17,37 @@ import torch
 from train.actors import PolicyActor
 from train.envs.cpu.env import EnvConfig, InteractionEnv
 from train.episodes import Episode
-from train.export.metadata import INPUTS
+from train.export.metadata import inputs_of
 from train.export.runtime import OnnxPolicy
 from train.policy import InteractionPolicy
 
 
 def recorded_windows(policy: InteractionPolicy, episodes: list[Episode], steps: int) -> tuple[np.ndarray, ...]:
-    """``(proprio, root_command, df)`` windows ``(len(episodes) * steps', l, dim)`` the torch ``policy`` observed
-    acting on ``episodes`` (at scale 1, together) for up to ``steps`` control steps (an episode's windows until it
-    ends)."""
+    """``(proprio, root_command, df)`` windows ``(len(episodes) * steps', l, dim)`` (a vision student's: clean ``depth``
+    frames in place of df) the torch ``policy`` observed acting on ``episodes`` (at scale 1, together) for up to
+    ``steps`` control steps (an episode's windows until it ends)."""
     env = InteractionEnv(EnvConfig.for_policy(policy.layout, threads=1))
     env.reset([(e, 1.0) for e in episodes])
-    actor = PolicyActor(policy)
+    inputs = inputs_of(policy)
+    if inputs[2] == "depth":  # a vision student, its clean camera
+        from train.vision.actor import VisionActor
+        from train.vision.noise import DepthNoise
+
+        actor = VisionActor(policy, DepthNoise.off())
+    else:
+        actor = PolicyActor(policy)
     actor.reset(env)
-    kept: dict[str, list[np.ndarray]] = {k: [] for k in INPUTS}
+    kept: dict[str, list[np.ndarray]] = {k: [] for k in inputs}
     done = np.zeros(env.num_envs, bool)
     for _ in range(steps):
-        for k in INPUTS:
+        for k in inputs:
             kept[k].append(actor.history.terms[k][~done].copy())
         obs, done = env.step(actor.act(env))
         actor.observe(obs)
         if done.all():
             break
     env.close()
-    return tuple(np.concatenate(kept[k]).astype(np.float32) for k in INPUTS)
+    return tuple(np.concatenate(kept[k]).astype(np.float32) for k in inputs)
 
 
 def parity(policy: InteractionPolicy, onnx_path: str | Path, windows: tuple[np.ndarray, ...]) -> dict:

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from pipeline.errors import InputError
-from train.export.metadata import EXPORT_FORMAT, INPUTS, METADATA_KEY, OUTPUT
+from train.export.metadata import EXPORT_FORMAT, INPUTS, METADATA_KEY, OUTPUT, VISION_INPUTS
 from train.policy import PolicyConfig, PolicyLayout
 
 
@@ -61,16 +61,27 @@ class OnnxPolicy:
         if expect_layout is not None and (bad := self.layout.mismatch(expect_layout)) is not None:
             raise InputError(path, *bad)
         self.session = cpu_session(path)
-        names = tuple(i.name for i in self.session.get_inputs())
-        if names != INPUTS:
-            raise InputError(path, "inputs", f"graph inputs {names}, expected {INPUTS}")
+        self.inputs = tuple(i.name for i in self.session.get_inputs())
+        if self.inputs not in (INPUTS, VISION_INPUTS):
+            raise InputError(path, "inputs", f"graph inputs {self.inputs}, expected {INPUTS} or {VISION_INPUTS}")
+        self.camera = None
+        if self.inputs == VISION_INPUTS:  # a vision student: the camera it was trained with
+            from train.vision.camera import DepthCamera
+
+            config = self.metadata["camera"]["config"]
+            self.camera = DepthCamera(**{k: tuple(v) if isinstance(v, list) else v for k, v in config.items()})
 
     def eval(self) -> OnnxPolicy:
         return self
 
-    def act(self, proprio: torch.Tensor, root_command: torch.Tensor, df: torch.Tensor) -> torch.Tensor:
+    def act(self, proprio: torch.Tensor, root_command: torch.Tensor, third: torch.Tensor) -> torch.Tensor:
+        """Joint targets for raw windows: ``third`` the DF windows, or a vision student's depth frames."""
         feed = {
             k: np.ascontiguousarray(x.detach().cpu().numpy(), np.float32)
-            for k, x in zip(INPUTS, (proprio, root_command, df))
+            for k, x in zip(self.inputs, (proprio, root_command, third))
         }
         return torch.from_numpy(self.session.run([OUTPUT], feed)[0])
+
+    def act_observation(self, terms: Mapping[str, torch.Tensor]) -> torch.Tensor:
+        """:meth:`act` on the environment's full observation windows: only the graph's inputs are read."""
+        return self.act(*(terms[k] for k in self.inputs))

@@ -17,6 +17,17 @@ simulated state (:class:`TaskMeter`, one per environment):
   hands) counts as failure (rate 0). Its ``success`` is ``rate >= Rules.push_success_rate``.
 
 A fall (:func:`pipeline.terms.fall.fallen`) ends the episode; what was achieved before it stands.
+
+**Root tracking accuracy** ``R_acc`` (App. "Evaluation Metrics", Table 3's real-world deployment): the share of the
+episode's control steps whose root is within :attr:`Rules.root_tolerance_m` (0.6 m) of the commanded root trajectory,
+
+    R_acc = #{t : d_t <= 0.6 m} / T,    d_t = |p_root(t) - p_cmd(t)|_xy,
+
+for every task (:attr:`TaskMeter.root_accuracy`). ``d_t`` is :attr:`StepFacts.root_dev_m`, filled by the environment
+(:meth:`train.envs.cpu.env.EnvSlot.facts` says what the commanded trajectory is and why the distance is horizontal).
+``T`` is the episode's full length in control steps (:attr:`TaskMeter.root_total`), not the steps run: the steps a
+fall cut off count as off the track, so a policy that falls at step 10 of 500 scores at most 2%, not 100% (the same
+reason as Push's denominator above).
 """
 
 from __future__ import annotations
@@ -38,6 +49,7 @@ class Rules:
     rest_m: float = 0.05
     carry_tolerance_m: float = 0.6
     push_success_rate: float = 0.5
+    root_tolerance_m: float = 0.6  # R_acc: the root's horizontal distance to the commanded trajectory
 
 
 @dataclass
@@ -48,6 +60,7 @@ class StepFacts:
     object_pos: np.ndarray  # (3,) its position
     object_ref: np.ndarray  # (3,) its reference track's position at this step
     root_z: float
+    root_dev_m: float  # the root's horizontal distance to the commanded root trajectory at this step (R_acc)
     pelvis_on_object: bool  # pelvis / hip geoms touching the object
     hand_on_object: bool
     body_on_object: bool  # another robot link (not hands, not feet) touching it
@@ -75,6 +88,8 @@ class TaskMeter:
     seat_run: int = 0  # consecutive steps of pelvis-chair contact at any root height (SitStand's diagnosis)
     best_seat_run: int = 0
     seat_root_z: list[float] = field(default_factory=list)  # root heights while the pelvis touches the chair
+    root_total: int = 0  # the episode's full length in control steps (R_acc's denominator)
+    root_within: int = 0  # of the steps run, those with the root within Rules.root_tolerance_m of the command
 
     def __post_init__(self):
         if self.task not in TASKS:
@@ -100,6 +115,7 @@ class TaskMeter:
             if f.pelvis_on_object:
                 self.seat_root_z.append(f.root_z)
         self.picked |= f.object_low > r.pick_m
+        self.root_within += f.root_dev_m <= r.root_tolerance_m
         self.max_dev = max(self.max_dev, float(np.linalg.norm(f.object_pos - f.object_ref)))
         if f.reference_pushing:
             self.push_frames += 1
@@ -112,6 +128,13 @@ class TaskMeter:
         if not self.push_frames or self.body_frames > self.hand_frames:
             return 0.0
         return self.hand_frames / max(self.push_total, self.push_frames)
+
+    @property
+    def root_accuracy(self) -> float:
+        """``R_acc`` (module docstring): the steps on the track over the episode's full length (the steps run when
+        longer, e.g. a meter fed by hand without ``root_total``); 0 before any step."""
+        total = max(self.root_total, self.steps)
+        return self.root_within / total if total else 0.0
 
     @property
     def success(self) -> bool:
@@ -131,14 +154,16 @@ class TaskMeter:
         return self.picked and self.max_dev <= r.carry_tolerance_m and placed
 
     def summary(self) -> dict:
-        """The episode's figures; SitStand adds why a sit failed: the longest pelvis-chair contact at any root
-        height (``seated_s``) and the median root height during contact (``seated_root_z_m``, None if none)."""
+        """The episode's figures (``root_accuracy``: ``R_acc``, 0..1); SitStand adds why a sit failed: the longest
+        pelvis-chair contact at any root height (``seated_s``) and the median root height during contact
+        (``seated_root_z_m``, None if none)."""
         out = {
             "task": self.task,
             "steps": self.steps,
             "success": bool(self.success),
             "contact_rate": self.contact_rate,
             "max_object_dev_m": self.max_dev,
+            "root_accuracy": self.root_accuracy,
         }
         if self.task == "SitStand":
             out["seated_s"] = self.best_seat_run / self.fps

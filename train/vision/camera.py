@@ -6,25 +6,82 @@ y axis: by default the G1's RealSense D435 mount (Unitree's G1 URDF, ``d435_join
 (:meth:`DepthCamera.frame`) the optical axis is ``C[:, 0]`` (the body's x after the pitch), image right is
 ``-C[:, 1]`` and image down ``-C[:, 2]`` (ROS's body-frame convention: x forward, y left, z up).
 
+**Offset.** An optional :class:`CameraOffset` moves the camera off its nominal mount, for per-episode extrinsics
+and per-step jitter (:mod:`train.vision.noise`): ``pos`` is added to ``pos`` in the body's frame, and ``rot =
+(roll, pitch, yaw)`` turns the camera frame about its own axes after the mount's pitch,
+``C' = C R_x(roll) R_y(pitch) R_z(yaw)`` (roll about the optical axis; a positive pitch tips it further down, as the
+mount's does). No offset, or an all-zero one, gives the nominal pose bit for bit.
+
 **Pinhole.** ``width x height`` pixels over ``fov_x x fov_y`` degrees (the D435's depth stream: ~87 x 58); pixel
 ``(r, c)``'s centre is at ``u = (c + 1/2 - W/2) / f_x``, ``v = (r + 1/2 - H/2) / f_y`` with
 ``f = (size / 2) / tan(fov / 2)``, its ray ``d = normalise(x + u (-y) + v (-z))`` in the world.
 
 **Depth.** The z-depth ``z = t (d . x)`` of the first hit at range ``t`` among the geoms of ``geom_groups``, clipped to
-``[near, far]``; no hit within ``far`` reads ``far``. The default groups {0, 3} are the world, the objects and the
-G1's collision primitives (its visual meshes are in group 2): the paper's student sees the scene the physics
-has. Measured (FIELD-NOTES, a 64 x 64 image of the G1 and a box): ~0.5 ms through these groups, 6.8-11 ms through
-every geom.
+``[near, far]``; no hit reads ``far``. ``mj_multiRay``'s cutoff ``far`` skips the geoms lying wholly farther than
+``far`` from the camera, not each ray at range ``far``: a hit on another geom up to ``far / cos(angle off axis)`` away
+still reads its z-depth, so in the image's corners (3 to 4.4 m away by default) a surface beyond ``far`` along its ray
+reads either (mjlab's camera: its depth, :mod:`train.envs.mjlab.camera`). The default groups {0, 3} are the world,
+the objects and the G1's collision primitives (its visual meshes are in group 2): the paper's student sees the scene
+the physics has. Measured (FIELD-NOTES, a 64 x 64 image of the G1 and a box): ~0.5 ms through these groups, 6.8-11 ms
+through every geom.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from pipeline.errors import InputError
+
+
+def _rotation_xyz(rot: tuple[float, float, float]) -> np.ndarray:
+    """``R_x(roll) R_y(pitch) R_z(yaw)``: turns about the frame's own x, then y, then z (intrinsic)."""
+    (cx, cy, cz), (sx, sy, sz) = map(math.cos, rot), map(math.sin, rot)
+    return np.array(  # the product written out
+        [
+            [cy * cz, -cy * sz, sy],
+            [sx * sy * cz + cx * sz, -sx * sy * sz + cx * cz, -sx * cy],
+            [-cx * sy * cz + sx * sz, cx * sy * sz + sx * cz, cx * cy],
+        ]
+    )
+
+
+@dataclass(frozen=True)
+class CameraOffset:
+    """A camera pose offset (module docstring): ``pos`` (m, in the mount body's frame), ``rot`` (roll, pitch, yaw; rad,
+    about the camera frame's own axes after the mount's pitch).
+
+    ``a + b`` adds the positions (exact: both are body-frame translations) and the angles (a first-order composition:
+    the error is of the order of the product of the two angles, ~1e-4 rad for the 0.01-rad offsets of
+    :mod:`train.vision.noise`)."""
+
+    pos: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rot: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        for name in ("pos", "rot"):  # plain Python: built every control step, a few microseconds
+            value = getattr(self, name)
+            try:
+                v = tuple(float(x) for x in value)
+            except (TypeError, ValueError):
+                v = ()
+            if len(v) != 3 or not all(map(math.isfinite, v)):
+                raise InputError("camera", f"offset.{name}", f"{value!r} is not 3 finite numbers")
+            object.__setattr__(self, name, v)
+
+    def __add__(self, other: CameraOffset) -> CameraOffset:
+        if not isinstance(other, CameraOffset):
+            return NotImplemented
+        return CameraOffset(
+            tuple(a + b for a, b in zip(self.pos, other.pos)), tuple(a + b for a, b in zip(self.rot, other.rot))
+        )
+
+    @property
+    def is_zero(self) -> bool:
+        return not any(self.pos) and not any(self.rot)
 
 
 @dataclass(frozen=True)
@@ -66,13 +123,19 @@ class DepthCamera:
             raise InputError("camera", "body", f"{self.body!r} is not a body of this model")
         return bid
 
-    def frame(self, m: mujoco.MjModel, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
-        """``(position (3,), C (3, 3))``: the camera's world position and axes (columns: optical axis, left, up)."""
+    def frame(
+        self, m: mujoco.MjModel, d: mujoco.MjData, offset: CameraOffset | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(position (3,), C (3, 3))``: the camera's world position and axes (columns: optical axis, left, up),
+        moved by ``offset`` if one is given (module docstring)."""
         b = self.body_id(m)
         R = d.xmat[b].reshape(3, 3)
         c, s = np.cos(self.pitch), np.sin(self.pitch)
         pitch = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])  # about y: x tips down for pitch > 0
-        return d.xpos[b] + R @ np.asarray(self.pos), R @ pitch
+        if offset is None or offset.is_zero:
+            return d.xpos[b] + R @ np.asarray(self.pos), R @ pitch
+        pos = np.asarray(self.pos) + np.asarray(offset.pos)
+        return d.xpos[b] + R @ pos, R @ pitch @ _rotation_xyz(offset.rot)
 
     def rays(self) -> np.ndarray:
         """(H, W, 3) unit ray directions in the camera frame ``(x, y, z)`` (module docstring)."""
@@ -83,9 +146,10 @@ class DepthCamera:
         d = np.stack([np.ones_like(uu), -uu, -vv], axis=-1)
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
-    def render(self, m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
-        """(H, W) float32 z-depth in metres of ``d`` (after ``mj_kinematics``), clipped to ``[near, far]``."""
-        origin, C = self.frame(m, d)
+    def render(self, m: mujoco.MjModel, d: mujoco.MjData, offset: CameraOffset | None = None) -> np.ndarray:
+        """(H, W) float32 z-depth in metres of ``d`` (after ``mj_kinematics``), clipped to ``[near, far]``, from the
+        camera moved by ``offset`` if one is given."""
+        origin, C = self.frame(m, d, offset)
         local = self.rays().reshape(-1, 3)
         world = local @ C.T
         n = len(world)

@@ -135,7 +135,12 @@ class EnvSlot:
         )
         end = self.objects[0].pose[sim.frames - 1, :3] if self.objects else None
         self.meter = TaskMeter(
-            episode.task, sim.robot.fps, cfg.rules, track_end=end, push_total=int(self.pushing[1:].sum())
+            episode.task,
+            sim.robot.fps,
+            cfg.rules,
+            track_end=end,
+            push_total=int(self.pushing[1:].sum()),
+            root_total=control_steps(episode),
         )
         self.t, self.done, self.fell = 0, False, False
         self.last_action = np.zeros(NUM_JOINTS)
@@ -182,9 +187,21 @@ class EnvSlot:
         self.fell = fallen(d, sim.robot.qpos[k, 2], self.torso, self.ref_torso_quat[k])
         self.last_facts = self.facts(k)
         self.meter.update(self.last_facts)
-        self.done = self.fell or self.t >= sim.frames - 1
+        self.done = self.fell or self.t >= control_steps(self.episode)
 
     def facts(self, k: int) -> StepFacts:
+        """What the meter reads at reference frame ``k = min(t, frames - 1)`` (:meth:`advance`).
+
+        ``root_dev_m`` (``R_acc``, :mod:`train.mdp.tasks`) is ``|p_root - q_k[:2]|``, ``q_k`` the episode's simulated
+        root at the same frame: the trajectory the root command walks along (:meth:`InteractionEnv.observe` aims it at
+        the frame :attr:`EnvConfig.root_horizon_s` ahead, where the root is meant to be *then*; against that point a
+        perfect tracker would be a second's walk off). In a chain the episode is the relocated one
+        (:func:`train.evaluation.chains.relocated`), so the distance is to the relocated track. A training
+        variation's ``command_offset`` is noise on what the policy reads, not the command, and is not applied here.
+        Horizontal (x, y), not 3-D: the paper's "Euclidean distance between the root position and the commanded
+        trajectory" does not say which; its commanded trajectory is drawn as a path on the floor (the yellow arrow of
+        the long-horizon figure), and the root height legitimately departs from the 1.0x reference when the robot sits
+        on a scaled chair or crouches to a scaled box; the chains' stray test uses the same distance."""
         m, d = self.scene.model, self.data
         pelvis = hand = body = False
         for c in robot_contacts(m, d, self.robot_geoms):
@@ -200,11 +217,18 @@ class EnvSlot:
             object_pos=pos,
             object_ref=o.pose[k, :3],
             root_z=float(d.qpos[2]),
+            root_dev_m=float(np.linalg.norm(d.qpos[:2] - self.episode.simulated.robot.qpos[k, :2])),
             pelvis_on_object=pelvis,
             hand_on_object=hand,
             body_on_object=body,
             reference_pushing=bool(self.pushing[k]),
         )
+
+
+def control_steps(episode: Episode) -> int:
+    """The control steps an episode runs to its reference's last frame (:meth:`EnvSlot.advance` ends it at
+    ``t = frames - 1``; at least one): the full length ``R_acc`` divides by."""
+    return max(episode.simulated.frames - 1, 1)
 
 
 def cached_field(cache: dict, o) -> ObjectField:
