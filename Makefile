@@ -18,7 +18,7 @@ RUN_ARGS = -j $(JOBS) --executor $(EXECUTOR)
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install lint format retarget import physicalize train-residual features corpus train-bc train-aip eval test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-train bench-train-mjlab bench-features bench-export bench-vision export distill clean-venv
+.PHONY: install lint format retarget import physicalize train-residual features corpus train-bc train-aip eval test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-train bench-train-mjlab bench-features bench-export bench-vision bench-vision-mjlab export distill clean-venv
 
 install: $(VENV)/.installed
 
@@ -195,6 +195,10 @@ bench-export: install
 # The vision stage's speed (bench/bench_vision.py); POLICY (or RUN) a MoCap policy.pt, default runs/adam_seed0/policy.pt.
 bench-vision: install
 	$(PY) bench/bench_vision.py --name $(CORPUS) $(if $(filter-out file,$(origin POLICY) $(origin RUN)),--policy $(POLICY))
+
+# Depth on mjlab, CUDA GPU (bench/bench_vision_mjlab.py): env steps/s at 4096 worlds without and with the depth camera.
+bench-vision-mjlab: install
+	$(PY) bench/bench_vision_mjlab.py --name $(CORPUS) $(if $(filter-out file,$(origin POLICY) $(origin RUN)),--policy $(POLICY)) $(BENCH_ARGS)
 
 clean-venv:
 	rm -rf $(VENV)

@@ -23,10 +23,9 @@ import numpy as np
 import torch
 
 from train.episodes import load_episodes
-from train.export.onnx_policy import export_onnx
+from train.export.onnx_policy import export_onnx, load_any_policy
 from train.export.parity import parity, recorded_windows
 from train.export.runtime import OnnxPolicy
-from train.policy import load_policy
 
 
 def _latency(act, windows, batch: int, calls: int) -> float:
@@ -55,7 +54,7 @@ def main() -> None:
         cmd = [sys.executable, "-m", "lessmimic", "export", "--policy", a.policy, "--out", str(out), "--overwrite"]
         subprocess.run(cmd, check=True, capture_output=True)
         command_s = time.perf_counter() - t0
-        policy = load_policy(a.policy)
+        policy = load_any_policy(a.policy)  # a MoCap-DF policy or a vision student
         by_task: dict[str, list] = {}
         for e in load_episodes(a.name):
             by_task.setdefault(e.task, []).append(e)

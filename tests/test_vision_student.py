@@ -17,6 +17,7 @@ from lessmimic.cli import build_parser, main
 from lessmimic.train_commands import _cmd_distill
 from pipeline.errors import InputError
 from train.envs.cpu.env import InteractionEnv
+from train.evaluation.table2 import EvalConfig, scale_line, scale_note
 from train.export.metadata import VISION_INPUTS
 from train.export.onnx_policy import export_onnx
 from train.export.parity import parity, recorded_windows
@@ -151,6 +152,10 @@ def test_one_distillation_resumes_and_repeats_for_a_seed(bc_corpus, tmp_path):
     assert report["teacher"] == source and report["scale"]["distill_iterations"] == 2
     assert report["scale"]["env_steps"] == sum(r["env_steps"] + r["student"]["env_steps"] for r in rows_a)
     assert is_vision_checkpoint(tmp_path / "a" / "policy.pt")
+    first = scale_note("train", EvalConfig(), tmp_path / "a" / "policy_distill0.pt")["policy"]["training_scale"]
+    assert first["distill_iterations"] == 1 and first["windows"] == rows_a[0]["aggregated_windows"]
+    assert first["env_steps"] == row["env_steps"] + row["student"]["env_steps"]
+    assert "2 DAgger iterations" in scale_line(scale_note("train", EvalConfig(), tmp_path / "a" / "policy.pt"))
 
 
 def test_the_latent_alignment_switch_reports_its_cosine(bc_corpus, tmp_path):

@@ -206,8 +206,8 @@ def cell_text(c: dict) -> str:
 def scale_note(corpus: str, cfg: EvalConfig, checkpoint: str | Path | None = None) -> dict:
     """What an evaluation is worth: the corpus, episodes per cell and seed, the seeds and, for a policy checkpoint,
     its training scale from the ``report.json`` of its run folder (``"unknown"`` without one). An intermediate
-    checkpoint of the run (``policy_bc.pt``, ``policy_dagger<i>.pt``) gets its own DAgger iterations and windows from
-    the run's DAgger log, not the finished run's."""
+    checkpoint of the run (``policy_bc.pt``, ``policy_dagger<i>.pt``, a vision student's ``policy_distill<i>.pt``) gets
+    its own iterations and windows from the run's log, not the finished run's."""
     note = {"corpus": corpus, "episodes_per_cell_and_seed": cfg.episodes, "seeds": list(cfg.seeds)}
     if checkpoint is not None:
         checkpoint = Path(checkpoint)
@@ -224,8 +224,25 @@ def scale_note(corpus: str, cfg: EvalConfig, checkpoint: str | Path | None = Non
                 "dagger_windows": last.get("aggregated_windows", 0),
                 "dagger_last": last,
             }
+        distilled = re.fullmatch(r"policy_distill(\d+)\.pt", checkpoint.name)
+        if isinstance(scale, dict) and distilled:  # a vision student's intermediate checkpoint
+            scale = distill_scale(scale, checkpoint.parent, int(distilled.group(1)))
         note["policy"] = {"checkpoint": str(checkpoint), "training_scale": scale}
     return note
+
+
+def distill_scale(scale: dict, run_dir: Path, i: int) -> dict:
+    """A distillation's ``scale`` (:func:`train.vision.distill.report`) at its iteration ``i`` (from its log)."""
+    path = run_dir / "distill_log.jsonl"
+    rows = [json.loads(line) for line in path.open()][: i + 1] if path.is_file() else []
+    episodes = sum(n for r in rows for tally in (r["tasks"], r["student"]["tasks"]) for _, n in tally.values())
+    return {
+        **scale,
+        "distill_iterations": len(rows),
+        "episodes": episodes,
+        "env_steps": sum(r["env_steps"] + r["student"]["env_steps"] for r in rows),
+        "windows": rows[-1]["aggregated_windows"] if rows else 0,
+    }
 
 
 def scale_line(note: dict) -> str:

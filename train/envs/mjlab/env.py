@@ -101,8 +101,9 @@ def check_device(device: str) -> None:
 
 
 def env_cfg(worlds: Worlds, envs: int, history: int, weights: R.RewardWeights,
-            links: tuple[str, ...] = DF_LINKS) -> ManagerBasedRlEnvCfg:  # fmt: skip
-    """The mjlab configuration of ``envs`` worlds over ``worlds``' episodes (module docstring)."""
+            links: tuple[str, ...] = DF_LINKS, sensors: tuple = ()) -> ManagerBasedRlEnvCfg:  # fmt: skip
+    """The mjlab configuration of ``envs`` worlds over ``worlds``' episodes (module docstring); ``sensors``: the
+    scene's extra sensors (e.g. the vision student's depth camera, :func:`train.envs.mjlab.camera.depth_sensor_cfg`)."""
     profile = worlds.episodes[0].profile
     if any(e.profile != profile for e in worlds.episodes):
         raise InputError(worlds.episodes[0].simulated.robot.source, "actuator_profile", "episodes of two profiles")
@@ -135,6 +136,7 @@ def env_cfg(worlds: Worlds, envs: int, history: int, weights: R.RewardWeights,
             num_envs=envs,
             entities={"robot": robot, "object": obj},
             spec_fn=lambda spec: add_object_floor_pairs(spec, scene_object),
+            sensors=tuple(sensors),
         ),
         sim=SimulationCfg(nconmax=CONTACTS, njmax=CONSTRAINT_ROWS, mujoco=MujocoCfg(**_options())),
         observations={"policy": ObservationGroupCfg(terms=policy), "critic": ObservationGroupCfg(terms=critic)},
@@ -183,10 +185,11 @@ class MjlabPostTrainEnv(VecEnv):
     (``policy`` windows, ``critic`` current step) and extras (``style``, ``time_outs``, ``log``)."""
 
     def __init__(self, episodes: list[Episode], history: int, config: PostEnvConfig = PostEnvConfig(),
-                 device: str = "cuda"):  # fmt: skip
+                 device: str = "cuda", sensors: tuple = ()):  # fmt: skip
         check_device(device)
         self.worlds = Worlds(episodes, config.envs, config.randomization, config.seed, device)
-        self.env = ManagerBasedRlEnv(env_cfg(self.worlds, config.envs, history, config.weights), device=device)
+        cfg = env_cfg(self.worlds, config.envs, history, config.weights, sensors=sensors)
+        self.env = ManagerBasedRlEnv(cfg, device=device)
         self.obs, _ = self.env.reset()
         self.cfg, self.device = config, torch.device(device)
         self.num_envs, self.num_actions = config.envs, NUM_JOINTS
