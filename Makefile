@@ -121,15 +121,15 @@ BACKEND ?= cpu
 train-aip: install
 	$(CLI) train-aip --name $(CORPUS) --run runs/$(RUN) --backend $(BACKEND) $(if $(ABLATION),--ablation=$(ABLATION)) $(AIP_ARGS)
 
-# Train III (paper Sec. III-D): a vision student distilled from TEACHER (a MoCap-DF policy; default the run's) by
+# Train III (paper Sec. III-D): a vision student distilled from DISTILL_TEACHER (a MoCap-DF policy; default the run's) by
 # DAgger on egocentric depth (64 x 40 at the G1's D435 mount) under the physical and the sensor's randomisations, into
 # runs/$(RUN)/vision/: 12 iterations x (16 + 8 probe) episodes, refits of 800 x 256 windows, ~1 h on one core;
 # resumable. DISTILL_ARGS="--align 1" the latent-alignment ablation, "--randomization off|full" the physical ones.
 # Score it beside its teacher: `make eval POLICY=runs/$(RUN)/vision/policy.pt EVAL_ARGS="--scales 1.0 --chains 5"`.
-TEACHER ?= runs/$(RUN)/policy.pt
+DISTILL_TEACHER ?= runs/$(RUN)/policy.pt
 DISTILL_ARGS ?=
 distill: install
-	$(CLI) distill --name $(CORPUS) --teacher $(TEACHER) --run runs/$(RUN)/vision $(if $(OVERWRITE),--overwrite) $(DISTILL_ARGS)
+	$(CLI) distill --name $(CORPUS) --teacher $(DISTILL_TEACHER) --run runs/$(RUN)/vision $(if $(OVERWRITE),--overwrite) $(DISTILL_ARGS)
 
 # EVAL_ARGS="--chains 5,10" adds the long-horizon chains (Table 3) of the policy; "--episodes 8" more per cell.
 # POLICY=runs/$(RUN)/policy.onnx evaluates the exported file through onnxruntime in the same harness.
