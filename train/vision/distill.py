@@ -30,7 +30,9 @@ Measured (laptop scale, teacher: Train I's best seed, one training seed, 24 eval
 the README's table): after 12 iterations (65k env steps, 41 min on one core) PickUp 79.2, Push contact 87.7, Carry
 8.3% against the teacher's 91.7 / 93.9 / 16.7; at 8 iterations Eq. (8) alone 54.2 / 70.5 / 33.3, with the alignment
 term 75.0 / 83.1 / 8.3, without the physical randomisation 62.5 / 75.0 / 8.3 (intervals of +-15-20 points). In its
-own rollouts under the narrow randomisation the teacher succeeded in 2 of 16 episodes, 8 of 16 without it.
+own rollouts under the narrow randomisation the teacher succeeded in 2 of 16 episodes, 8 of 16 without it. A second
+training seed after 12 iterations: 62.5 / 66.0 / 16.7; both seeds after 20: 66.7 / 80.6 / 12.5 and 66.7 / 72.9 / 4.2
+(PickUp ~0.73x its teacher's, Push 0.78-0.93x).
 
 The run folder holds each iteration's student (``policy_distill<i>.pt``), its new windows (``distill_data<i>.pt``,
 written once), the optimiser and the log: a rerun resumes after the last finished iteration. Deterministic for a

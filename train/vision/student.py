@@ -16,10 +16,11 @@ parkour students, mjlab's own depth CNN). Measured (one CPU thread, forward and 
 256 windows): 89 ms, against 525 ms for three stride-2 convolutions (16, 32, 32; 5 x 5 first) and 255 ms for
 (8, 16, 32): the patch embedding makes a refit of ~10^3 steps a matter of minutes on a laptop.
 
-The head (backbone, normalisers) is a copy of pi_full's, fine-tuned with the encoder; pi_full's frozen VAE comes
-along only for the optional latent alignment loss (:func:`train.vision.distill.distill_loss`) and is never applied
-to the student's input. :meth:`VisionPolicy.act_observation` takes the full observation the environment gives the
-MoCap policy and reads only ``proprio``, ``root_command`` and ``depth`` from it: the MoCap DF cannot leak in.
+The head (backbone, normalisers) is a copy of pi_full's, fine-tuned with the encoder; the copy carries pi_full's
+frozen VAE (the head's class holds one) but never applies it to the student's input (the alignment loss's targets,
+:func:`train.vision.distill.distill_loss`, are pi_full's latents recorded during the rollouts).
+:meth:`VisionPolicy.act_observation` takes the full observation the environment gives the MoCap policy and reads only
+``proprio``, ``root_command`` and ``depth`` from it: the MoCap DF cannot leak in.
 
 A checkpoint (:func:`save_vision_policy`, :func:`load_vision_policy`) nests pi_full's own checkpoint (the head) with
 the encoder's weights and the camera, and names the teacher it was distilled from (path and SHA-256).
