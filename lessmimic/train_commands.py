@@ -67,6 +67,17 @@ def _cmd_export(a: argparse.Namespace) -> int:
     return 0
 
 
+def _check_corpus(policy, path: str, name: str) -> None:
+    """A one-line error unless ``policy`` reads the corpus ``name``'s DF links (of its contract) and acts for its
+    actuator profile."""
+    from pipeline.stage.paths import stage_dir
+    from train.policy import dataset_layout
+
+    want = dataset_layout(stage_dir(name, "features"), policy.layout.history, policy.layout.contract)
+    if bad := policy.layout.mismatch({"links": want.links, "actuator_profile": want.actuator_profile}):
+        raise InputError(path, *bad)
+
+
 def _load_scored(path: str):
     """The policy an evaluation scores: a checkpoint (MoCap-DF or vision) or its ONNX export (onnxruntime)."""
     if Path(path).suffix == ".onnx":  # an exported file, run by onnxruntime in the same harness
@@ -100,11 +111,10 @@ def _cmd_eval(a: argparse.Namespace) -> int:
 
     import torch
 
-    from pipeline.stage.paths import stage_dir
     from train.actors import PolicyActor, TeacherActor
     from train.episodes import load_episodes
     from train.evaluation.table2 import EvalConfig, evaluate, markdown, scale_note, write
-    from train.policy import dataset_layout, load_policy
+    from train.policy import load_policy
 
     torch.set_num_threads(a.threads)
     episodes = load_episodes(a.name)
@@ -114,10 +124,7 @@ def _cmd_eval(a: argparse.Namespace) -> int:
     results, scored = [], []  # scored: (actor, label) of the policies whose chains run too
     if a.policy:
         policy = _load_scored(a.policy)
-        # the corpus's links (of the policy's contract) and actuator profile
-        want = dataset_layout(stage_dir(a.name, "features"), policy.layout.history, policy.layout.contract)
-        if bad := policy.layout.mismatch({"links": want.links, "actuator_profile": want.actuator_profile}):
-            raise InputError(a.policy, *bad)
+        _check_corpus(policy, a.policy, a.name)
         scored.append((_actor(policy, a.clean_depth), f"{_kind(policy)} ({Path(a.policy).parent.name})"))
         teacher = getattr(policy, "teacher", None) or getattr(policy, "metadata", {}).get("teacher")
         if teacher and Path(teacher["path"]).is_file():  # a vision student: its MoCap teacher in the same run
@@ -159,17 +166,14 @@ def _cmd_eval(a: argparse.Namespace) -> int:
 def _cmd_distill(a: argparse.Namespace) -> int:
     import torch
 
-    from pipeline.stage.paths import stage_dir
     from train.episodes import load_episodes
     from train.export.metadata import sha256
-    from train.policy import dataset_layout, load_policy
+    from train.policy import load_policy
     from train.vision.distill import DistillConfig, distill, distill_randomization, with_overrides
 
     torch.set_num_threads(a.threads)
     teacher = load_policy(a.teacher)
-    want = dataset_layout(stage_dir(a.name, "features"), teacher.layout.history, teacher.layout.contract)
-    if bad := teacher.layout.mismatch({"links": want.links, "actuator_profile": want.actuator_profile}):
-        raise InputError(a.teacher, *bad)
+    _check_corpus(teacher, a.teacher, a.name)
     cfg = with_overrides(
         DistillConfig(),
         iterations=a.iterations,

@@ -157,9 +157,10 @@ def _save(data: WindowTensors, path: Path) -> None:
     write_torch_atomic(path, {k: getattr(data, k) for k in ("proprio", "root_command", "df", "rows", "action")})
 
 
-def read_log(run_dir: str | Path) -> list[dict]:
-    """The finished iterations' rows of ``run_dir/dagger_log.jsonl`` (none if there is no log)."""
-    path = Path(run_dir) / "dagger_log.jsonl"
+def read_log(run_dir: str | Path, log: str = "dagger_log.jsonl") -> list[dict]:
+    """The finished iterations' rows of ``run_dir/<log>`` (none if there is no log; the distillation's is
+    ``distill_log.jsonl``)."""
+    path = Path(run_dir) / log
     return [json.loads(line) for line in path.open()] if path.is_file() else []
 
 

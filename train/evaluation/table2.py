@@ -233,16 +233,9 @@ def scale_note(corpus: str, cfg: EvalConfig, checkpoint: str | Path | None = Non
 
 def distill_scale(scale: dict, run_dir: Path, i: int) -> dict:
     """A distillation's ``scale`` (:func:`train.vision.distill.report`) at its iteration ``i`` (from its log)."""
-    path = run_dir / "distill_log.jsonl"
-    rows = [json.loads(line) for line in path.open()][: i + 1] if path.is_file() else []
-    episodes = sum(n for r in rows for tally in (r["tasks"], r["student"]["tasks"]) for _, n in tally.values())
-    return {
-        **scale,
-        "distill_iterations": len(rows),
-        "episodes": episodes,
-        "env_steps": sum(r["env_steps"] + r["student"]["env_steps"] for r in rows),
-        "windows": rows[-1]["aggregated_windows"] if rows else 0,
-    }
+    from train.vision.distill import log_scale, read_log  # the vision stage only when a student is scored
+
+    return {**scale, **log_scale(read_log(run_dir)[: i + 1])}
 
 
 def scale_line(note: dict) -> str:

@@ -69,7 +69,7 @@ class OnnxPolicy:
             from train.vision.camera import DepthCamera
 
             config = self.metadata["camera"]["config"]
-            self.camera = DepthCamera(**{k: tuple(v) if isinstance(v, list) else v for k, v in config.items()})
+            self.camera = DepthCamera.from_dict(config)
 
     def eval(self) -> OnnxPolicy:
         return self

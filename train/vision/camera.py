@@ -111,6 +111,11 @@ class DepthCamera:
         if any(not 0 <= g < mujoco.mjNGROUP for g in self.geom_groups):
             raise InputError("camera", "geom_groups", f"{self.geom_groups!r}: groups are 0..{mujoco.mjNGROUP - 1}")
 
+    @classmethod
+    def from_dict(cls, d) -> DepthCamera:
+        """The camera of ``asdict(camera)`` read back from JSON (its tuples come back as lists)."""
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
     @property
     def focal(self) -> tuple[float, float]:
         """``(f_x, f_y)`` in pixels."""

@@ -56,6 +56,7 @@ from pipeline.errors import InputError
 from pipeline.stage.atomic import write_json_atomic, write_torch_atomic
 from train.actors import PolicyActor
 from train.dagger import draw_episodes, probe_episodes, task_weights
+from train.dagger import read_log as read_dagger_log
 from train.envs.cpu.env import EnvConfig, InteractionEnv
 from train.episodes import Episode
 from train.mdp import randomize as R
@@ -184,8 +185,7 @@ def _record(rec: WindowRecorder, which: np.ndarray, pupil: VisionActor, teacher:
 def distill_loss(student: VisionPolicy, b: DepthBatch, align: float) -> tuple[torch.Tensor, dict]:
     """Eq. (8) on normalised actions, plus ``align`` times the latent MSE (module docstring, 2.); the figures."""
     z = student.latents(b.depth)
-    pred = student.control.backbone(student.control.tokens_from_latents(b.proprio, b.root_command, z))
-    action = (pred - student.control.norm["action"].normalize(b.action)).pow(2).mean()
+    action = (student.head(b.proprio, b.root_command, z) - student.norm["action"].normalize(b.action)).pow(2).mean()
     loss, figures = action, {"action_loss": action.detach()}
     if align > 0:
         latent = (z - b.latent).pow(2).mean()
@@ -225,9 +225,22 @@ def fit(student: VisionPolicy, data: DepthWindows, cfg: DistillConfig, opt: torc
     }
 
 
+LOG = "distill_log.jsonl"
+
+
 def read_log(run_dir: str | Path) -> list[dict]:
-    path = Path(run_dir) / "distill_log.jsonl"
-    return [json.loads(line) for line in path.open()] if path.is_file() else []
+    """The finished iterations' rows of the distillation's log (:func:`train.dagger.read_log`)."""
+    return read_dagger_log(run_dir, LOG)
+
+
+def log_scale(rows: list[dict]) -> dict:
+    """The training scale of the iterations ``rows``: their count, episodes, env steps and aggregated windows."""
+    return {
+        "distill_iterations": len(rows),
+        "episodes": sum(n for r in rows for tally in (r["tasks"], r["student"]["tasks"]) for _, n in tally.values()),
+        "env_steps": sum(r["env_steps"] + r["student"]["env_steps"] for r in rows),
+        "windows": rows[-1]["aggregated_windows"] if rows else 0,
+    }
 
 
 def distill(
@@ -288,7 +301,7 @@ def distill(
         write_torch_atomic(run_dir / f"distill_data{it}.pt", new.state())
         save_vision_policy(student, run_dir / f"policy_distill{it}.pt", distill=settings)
         write_torch_atomic(opt_path, {"iteration": it, "state": opt.state_dict()})
-        with (run_dir / "distill_log.jsonl").open("a", encoding="utf-8") as f:  # last: the row marks it finished
+        with (run_dir / LOG).open("a", encoding="utf-8") as f:  # last: the row marks it finished
             f.write(json.dumps(row) + "\n")
         rows.append(row)
     save_vision_policy(student, run_dir / "policy.pt", distill=settings)
@@ -308,10 +321,7 @@ def report(rows: list[dict], cfg: DistillConfig, teacher_source: dict, run_dir: 
         "teacher": teacher_source,
         "scale": {
             "teacher": teacher_source.get("path"),
-            "distill_iterations": len(rows),
-            "episodes": sum(cfg.episodes + cfg.probe for _ in rows),
-            "env_steps": sum(r["env_steps"] + r["student"]["env_steps"] for r in rows),
-            "windows": last.get("aggregated_windows", 0),
+            **log_scale(rows),
             "fit_steps_per_iteration": cfg.fit_steps,
             "batch": cfg.batch,
             "align": cfg.align,

@@ -126,9 +126,13 @@ class VisionPolicy(nn.Module):
         z = self.encoder(depth)
         return z / (z.norm(dim=-1, keepdim=True) + 1e-8) if self.layout.demo else z
 
+    def head(self, proprio: torch.Tensor, root_command: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+        """Normalised actions ``(B, A)`` of the control head on latents ``z (B, l, latent)``."""
+        return self.control.backbone(self.control.tokens_from_latents(proprio, root_command, z))
+
     def forward(self, proprio: torch.Tensor, root_command: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
         """Normalised actions ``(B, A)`` (what the distillation loss compares)."""
-        return self.control.backbone(self.control.tokens_from_latents(proprio, root_command, self.latents(depth)))
+        return self.head(proprio, root_command, self.latents(depth))
 
     @torch.no_grad()
     def act(self, proprio: torch.Tensor, root_command: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
@@ -189,7 +193,7 @@ def load_vision_policy(path: str | Path, device: str | torch.device = "cpu") -> 
         raise InputError(path, "format", f"not a vision policy checkpoint (expected format {VISION_FORMAT!r})")
     control = policy_from_checkpoint(ckpt.get("control"), path)
     try:
-        camera = DepthCamera(**{k: tuple(v) if isinstance(v, list) else v for k, v in ckpt["camera"].items()})
+        camera = DepthCamera.from_dict(ckpt["camera"])
         encoder = DepthEncoder(camera, control.config.latent, EncoderConfig.from_dict(ckpt["encoder_config"]))
         encoder.load_state_dict(ckpt["encoder"])
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:

@@ -16,8 +16,7 @@ import numpy as np
 import torch
 
 from pipeline.errors import InputError
-
-MM = 1000.0  # uint16 depth units per metre
+from train.vision.noise import MM, depth_to_mm
 
 
 class DepthBatch(NamedTuple):
@@ -94,7 +93,7 @@ class WindowRecorder:
         idx = np.flatnonzero(which)
         self.parts["proprio"].append(proprio[idx])
         self.parts["root_command"].append(root_command[idx])
-        self.parts["depth"].append(np.clip(np.rint(depth_m[idx] * MM), 0, 65535).astype(np.uint16))
+        self.parts["depth"].append(depth_to_mm(depth_m[idx]))
         self.parts["latent"].append(latent[idx])
         for k, i in enumerate(idx):
             self.ids[i].append(self.count + k)
