@@ -11,6 +11,11 @@ CLI    := $(VENV)/bin/lessmimic
 NAME   ?= default
 INPUT  ?=
 STAGE_ARGS = --name $(NAME) $(if $(INPUT),--input $(INPUT)) $(if $(OVERWRITE),--overwrite)
+# Geometry augmentation (retarget/augment.py): SCALES=0.6,0.8,1,1.2,1.4 retargets every clip once per object scale
+# (1: the clip itself; sx:sy:sz per axis), SHAPES=box,cylinder also as a circular cylinder (primitive boxes only).
+SCALES ?=
+SHAPES ?= box
+AUGMENT_ARGS = $(if $(SCALES),--augment-scales $(SCALES) --augment-shapes $(SHAPES))
 JOBS ?= 1
 EXECUTOR ?= local
 RUN_ARGS = -j $(JOBS) --executor $(EXECUTOR)
@@ -18,7 +23,7 @@ RUN_ARGS = -j $(JOBS) --executor $(EXECUTOR)
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install lint format retarget import physicalize train-residual features corpus train-bc train-aip eval test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-train bench-train-mjlab bench-features bench-export bench-vision bench-vision-mjlab export distill clean-venv
+.PHONY: install lint format retarget import physicalize train-residual features corpus subset train-bc train-aip eval test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-train bench-train-mjlab bench-features bench-export bench-vision bench-vision-mjlab export distill clean-venv
 
 install: $(VENV)/.installed
 
@@ -46,7 +51,7 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 	touch $@
 
 retarget: install
-	$(CLI) retarget $(STAGE_ARGS) $(RUN_ARGS)
+	$(CLI) retarget $(STAGE_ARGS) $(RUN_ARGS) $(AUGMENT_ARGS)
 
 # Bring your own G1 motion (BeyondMimic .npz, GMR .pkl, HDMI folders) as the retargeted stage: make import physicalize features INPUT=...
 OBJECT_MESH ?=
@@ -78,6 +83,9 @@ features: install
 # retarget ~2 min, physicalize ~7 min (91 clips valid), features ~20 s. Resumable like every stage (rerun the same
 # command after an interruption); another SEEDS over an existing corpus needs OVERWRITE=1. PROFILE=lessmimic_demo
 # physicalizes under the released demo's stiffer gains (81 clips valid; the policy trained on it acts for those gains).
+# With SCALES (and SHAPES) every clip comes in those object variants, each physicalized and validated on its own;
+# the physicalize report's "yield" counts valid / rejected / failed per task and variant: `make corpus CORPUS=aug
+# SEEDS=0-9 SCALES=0.4,0.6,0.8,1,1.2,1.4,1.6 SHAPES=box,cylinder JOBS=2`.
 # ABLATION=-Syn builds the -Syn ablation's twin corpus datasets/$(CORPUS)-syn/: the same retargeted clips, not
 # physicalized (physicalize teacher `kinematic`: the motion as it is, its physics measured, every clip kept; ~3 min).
 CORPUS ?= corpus
@@ -86,9 +94,17 @@ ABLATION ?=
 SYN = $(filter -Syn,$(ABLATION))
 CORPUS_ARGS = --name $(CORPUS)$(if $(SYN),-syn) $(if $(OVERWRITE),--overwrite) $(RUN_ARGS)
 corpus: install
-	$(CLI) retarget $(CORPUS_ARGS) --input synthetic:$(SEEDS)
+	$(CLI) retarget $(CORPUS_ARGS) --input synthetic:$(SEEDS) $(AUGMENT_ARGS)
 	$(CLI) physicalize $(CORPUS_ARGS) --teacher $(if $(SYN),kinematic,$(TEACHER)) --profile $(PROFILE) $(if $(KEEP_INVALID),--keep-invalid)
 	$(CLI) features $(CORPUS_ARGS)
+
+# The held-out protocol (issue #43): a training corpus of some variants of an augmented corpus, the others never
+# trained on: `make subset CORPUS=aug SUBSET=aug-train VARIANTS=x0.6,x0.8,x1,x1.2,x1.4`, then `make train-bc
+# CORPUS=aug-train RUN=aug` and `make eval CORPUS=aug POLICY=runs/aug/policy.pt EVAL_ARGS="--protocol matched"`.
+SUBSET ?= $(CORPUS)-train
+VARIANTS ?=
+subset: install
+	$(CLI) subset --name $(CORPUS) --out $(SUBSET) --variants $(VARIANTS) $(if $(OVERWRITE),--overwrite)
 
 # Train I (paper Sec. III-B): the DF VAE, behaviour cloning on the corpus, DAgger from the QP teacher, into runs/$(RUN)/.
 # Laptop scale by default (2 CPU cores, ~55 min on the 100-clip corpus: VAE + BC ~8 min, 20 DAgger iterations ~2.3 min

@@ -13,10 +13,12 @@ def retarget(
     executor: str = "local",
     body_model: str | None = None,
     height_override: float | None = None,
+    variants=(),
 ) -> dict:
     """Ingest ``input_path`` (a file, a folder, ``synthetic:<seeds>``, or None: the embedded default) into
     ``datasets/<name>/human/`` and retarget its clips into ``datasets/<name>/retargeted/``; the human stage runs only
-    when the retargeted dataset is not up to date (:func:`retarget.stage.run_stage`)."""
+    when the retargeted dataset is not up to date (:func:`retarget.stage.run_stage`); ``variants``: the geometry
+    augmentation's (:func:`retarget.augment.parse_variants`)."""
     from ingest.stage import ingest, input_label, source_fingerprint
     from retarget.stage import run_stage
 
@@ -33,4 +35,5 @@ def retarget(
         executor=executor,
         body_model=body_model,
         height_override=height_override,
+        variants=variants,
     )

@@ -15,6 +15,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from lessmimic.corpus_commands import add_corpus
 from lessmimic.train_commands import add_train
 from pipeline.errors import InputError
 from pipeline.stage.executor import EXECUTORS
@@ -50,7 +51,9 @@ def _run_args(p: argparse.ArgumentParser) -> None:
 
 def _cmd_retarget(a: argparse.Namespace) -> int:
     from lessmimic.chain import retarget
+    from retarget.augment import parse_variants
 
+    variants = parse_variants(a.augment_scales, a.augment_shapes) if a.augment_scales else ()
     report = retarget(
         a.input,
         a.name,
@@ -59,12 +62,15 @@ def _cmd_retarget(a: argparse.Namespace) -> int:
         executor=a.executor,
         body_model=a.body_model,
         height_override=a.height,
+        variants=variants,
     )
     if report.get("up_to_date"):
         print(up_to_date_line("retarget", a.name, "retargeted"))
         return 0
     s = report["summary"]
     print(f"retargeted {len(report['clips'])} clip(s), {len(report['failed'])} failed -> datasets/{a.name}/retargeted/")
+    if report.get("not_applicable"):
+        print(f"  {len(report['not_applicable'])} variant(s) not applicable (reasons in report.json)")
     for k in (
         "object_penetration_frac_1cm",
         "ground_penetration_frac_1cm",
@@ -139,7 +145,15 @@ def _cmd_physicalize(a: argparse.Namespace) -> int:
     for k in ("mpjpe_m", "root_pos_err_max_m", "penetration_max_m", "foot_slide_frac_1cm_per_frame", "realtime_factor"):
         if k in s:
             print(f"  {k}: {s[k]:.4g}")
+    if any(" " in key for key in report.get("yield", {})):  # an augmented corpus: the yield per task and variant
+        for key, row in report["yield"].items():
+            why = {**row["rejected"], **row["failed"]}
+            print(f"  {key}: {row['valid']}/{row['clips']} valid" + (f" ({_counts(why)})" if why else ""))
     return 0  # invalid clips are a measured outcome (in the report), not a failure of the run
+
+
+def _counts(counter: dict) -> str:
+    return ", ".join(f"{k}: {v}" for k, v in counter.items())
 
 
 def _cmd_physicalize_residual(a: argparse.Namespace) -> int:
@@ -248,6 +262,18 @@ def _add_retarget(sub) -> None:
     _run_args(p)
     p.add_argument(
         "--height", type=float, default=None, help="subject height override in metres (outside 1.0-2.3 m needs it)"
+    )
+    p.add_argument(
+        "--augment-scales",
+        default=None,
+        help="geometry augmentation (retarget.augment): every clip once per object scale of this comma list, e.g. "
+        "0.6,0.8,1,1.2,1.4 (1: the clip itself; sx:sy:sz per axis)",
+    )
+    p.add_argument(
+        "--augment-shapes",
+        default="box",
+        help="with --augment-scales: the shapes, box (the object's own) and/or cylinder (a box as a circular "
+        "cylinder), comma list (default box)",
     )
     p.set_defaults(func=_cmd_retarget)
 
@@ -369,7 +395,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="lessmimic", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     sub = ap.add_subparsers(dest="command", required=True)
-    for add in (_add_retarget, _add_import, _add_physicalize, _add_residual, _add_features, add_train, _add_tools):
+    adders = (_add_retarget, _add_import, _add_physicalize, _add_residual, _add_features, add_train, add_corpus)
+    for add in (*adders, _add_tools):
         add(sub)
     return ap
 

@@ -118,21 +118,33 @@ def _cmd_eval(a: argparse.Namespace) -> int:
 
     torch.set_num_threads(a.threads)
     episodes = load_episodes(a.name)
-    cfg = EvalConfig(seeds=tuple(int(s) for s in a.seeds.split(",")), episodes=a.episodes, envs=a.envs)
+    cfg = EvalConfig(
+        seeds=tuple(int(s) for s in a.seeds.split(",")),
+        episodes=a.episodes,
+        envs=a.envs,
+        protocol=a.protocol,
+        shape=a.shape,
+    )
+    tag = (
+        ""
+        if (a.protocol, a.shape) == ("scaled", "box")
+        else f" [{a.protocol}{', cylinder' if a.shape != 'box' else ''}]"
+    )
     if a.scales:
         cfg = replace(cfg, scales=tuple(float(x) for x in a.scales.split(",")))
     results, scored = [], []  # scored: (actor, label) of the policies whose chains run too
     if a.policy:
         policy = _load_scored(a.policy)
         _check_corpus(policy, a.policy, a.name)
-        scored.append((_actor(policy, a.clean_depth), f"{_kind(policy)} ({Path(a.policy).parent.name})"))
+        scored.append((_actor(policy, a.clean_depth), f"{_kind(policy)} ({Path(a.policy).parent.name}){tag}"))
         teacher = getattr(policy, "teacher", None) or getattr(policy, "metadata", {}).get("teacher")
         if teacher and Path(teacher["path"]).is_file():  # a vision student: its MoCap teacher in the same run
-            label = f"MoCap teacher ({Path(teacher['path']).parent.name})"
+            label = f"MoCap teacher ({Path(teacher['path']).parent.name}){tag}"
             scored.append((PolicyActor(load_policy(teacher["path"])), label))
-        results += [evaluate(actor, episodes, cfg, label) for actor, label in scored]
+        results += [evaluate(actor, episodes, cfg, label, corpus=a.name) for actor, label in scored]
     if a.teacher:
-        results.append(evaluate(TeacherActor(), episodes, cfg, "QP teacher, 1.0x reference"))
+        reference = "scale-matched reference" if a.protocol == "matched" else "1.0x reference"
+        results.append(evaluate(TeacherActor(), episodes, cfg, f"QP teacher, {reference}{tag}", corpus=a.name))
     if a.demo_loop:  # the released viewer's loop, replicated, on the export in its contract (train/export/demo_loop.py)
         from train.export.demo_loop import evaluate_demo_loop
 
@@ -361,7 +373,11 @@ def add_train(sub) -> None:
         help="a policy checkpoint (runs/<RUN>/policy.pt) or its ONNX export (.onnx); a vision student's is scored "
         "with its MoCap teacher in the same run",
     )
-    p.add_argument("--teacher", action="store_true", help="also score the QP teacher tracking the 1.0x reference")
+    p.add_argument(
+        "--teacher",
+        action="store_true",
+        help="also score the QP teacher tracking the 1.0x reference (--protocol matched: the scale-matched one)",
+    )
     p.add_argument(
         "--demo-loop",
         default=None,
@@ -385,5 +401,13 @@ def add_train(sub) -> None:
     p.add_argument("--chains-per-seed", type=int, default=4, help="chains per length and seed (default 4)")
     p.add_argument("--out", default=None, help="output folder (default: the policy's run folder /eval)")
     p.add_argument("--scales", default="", help="only these object scales of Table 2, e.g. 1.0 (default: all)")
+    p.add_argument(
+        "--protocol",
+        default="scaled",
+        choices=("scaled", "matched"),
+        help="scaled (the paper's): the demonstrations with the object scaled; matched: an augmented corpus's "
+        "variant made for each cell's scale (the QP teacher then tracks a scale-matched reference)",
+    )
+    p.add_argument("--shape", default="box", choices=("box", "cylinder"), help="cylinder: every box as a cylinder")
     p.add_argument("--clean-depth", action="store_true", help="a vision policy's camera without the sensor noise model")
     p.set_defaults(func=_cmd_eval)

@@ -140,10 +140,43 @@ def _checked_teacher(teacher: str, profile: str) -> tuple[TeacherSpec, ActuatorP
     return spec, prof
 
 
+def variant_label(clip: RobotClip) -> str | None:
+    """The clip's geometry variant (:mod:`retarget.augment`: ``x1`` the demonstration itself), None when the corpus
+    was not augmented."""
+    augment = clip.provenance.get("augment")
+    return augment.get("label") if isinstance(augment, dict) else None
+
+
+def yield_table(per_clip: list[dict]) -> dict:
+    """Per task and geometry variant (``"PickUp x0.6"``; a corpus without variants: per task): ``clips``, ``valid``,
+    and the invalid ones by class, ``rejected`` (the plan refused them: physicalize.feasibility) and ``failed`` (the
+    simulation did not hold: physicalize.validate), so a reader sees where the robot's own limits are."""
+    out: dict[str, dict] = {}
+    for c in per_clip:
+        key = " ".join(k for k in (c.get("task") or "no task", c.get("variant")) if k)
+        row = out.setdefault(key, {"clips": 0, "valid": 0, "rejected": {}, "failed": {}})
+        row["clips"] += 1
+        row["valid"] += bool(c["valid"])
+        for kind in ("rejected", "failure"):
+            if why := c.get(kind):
+                table = row["rejected" if kind == "rejected" else "failed"]
+                table[why] = table.get(why, 0) + 1
+    return dict(sorted(out.items()))
+
+
 def _report(
     results: list[ClipResult], clips: list[RobotClip], spec: TeacherSpec, teacher: str, prof, keep_invalid, kept: int
 ) -> dict:
-    per_clip = [{"episode": r.index, "source": r.source, "task": clips[r.index].task, **r.figures} for r in results]
+    per_clip = [
+        {
+            "episode": r.index,
+            "source": r.source,
+            "task": clips[r.index].task,
+            **({"variant": v} if (v := variant_label(clips[r.index])) else {}),
+            **r.figures,
+        }
+        for r in results
+    ]
     simulated = sum(r.rollout.frames for r in results if r.rollout is not None) / clips[0].fps if clips else 0.0
     seconds = sum(r.rollout.seconds for r in results if r.rollout)
     return {
@@ -161,6 +194,7 @@ def _report(
             "realtime_factor": simulated / max(seconds, 1e-9),
             "episodes_written": kept,
         },
+        "yield": yield_table(per_clip),
     }
 
 

@@ -65,6 +65,27 @@ class Primitive:
     def scaled(self, factor) -> Primitive:
         return Primitive(self.kind, self.size, tuple(np.asarray(self.scale) * np.broadcast_to(factor, (3,))))
 
+    def as_cylinder(self) -> Primitive:
+        """A box drawn as a circular cylinder along z: radius the mean of the box's x and y half-extents, the same
+        half-height (both at the box's scale). Circular so that it is MuJoCo's cylinder primitive on every backend:
+        a cylinder scaled per axis would be a collision mesh (:mod:`train.envs.mjlab.object`)."""
+        if self.kind != "box":
+            raise ValueError(f"only a box has a cylinder form, this primitive is a {self.kind}")
+        hx, hy, hz = (float(h) for h in self.half_extents)
+        return Primitive("cylinder", ((hx + hy) / 2, hz))
+
+    @property
+    def volume(self) -> float:
+        """The scaled primitive's volume [m^3]."""
+        hx, hy, hz = (float(h) for h in self.half_extents)
+        r = self.size[0]
+        if self.kind == "box":
+            return 8 * hx * hy * hz
+        if self.kind == "sphere":
+            return 4 / 3 * np.pi * hx * hy * hz
+        ends = 4 / 3 * np.pi * r**3 if self.kind == "capsule" else 0.0  # the capsule's two half-sphere caps
+        return float(np.prod(self.scale)) * (np.pi * r**2 * 2 * self.size[1] + ends)
+
 
 @dataclass(frozen=True)
 class MeshGeometry:
@@ -148,6 +169,14 @@ def chair_boxes(params):
 
 
 ObjectGeometry = Primitive | MeshGeometry | Chair
+
+
+def variant_label(scale, shape: str = "box") -> str:
+    """The name of an object variant (``retarget.augment``): ``x0.6`` (one scale for every axis), ``x0.6,1,1.4`` (per
+    axis), with ``-cylinder`` appended for a box drawn as a cylinder; ``x1`` is the object as it is."""
+    s = [float(v) for v in np.broadcast_to(np.asarray(scale, dtype=float), (3,))]
+    size = f"x{s[0]:g}" if s[0] == s[1] == s[2] else "x" + ",".join(f"{v:g}" for v in s)
+    return size + ("-cylinder" if shape == "cylinder" else "")
 
 
 def geometry_to_dict(g: ObjectGeometry) -> dict:

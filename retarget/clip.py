@@ -15,6 +15,7 @@ from pipeline.errors import InputError
 from pipeline.scene import SceneObject, build_scene
 from pipeline.take import human_hold, object_field
 from pipeline.terms.layout import CONTROL_FPS
+from retarget.augment import Variant, augment
 from retarget.contact import link_contact_flags
 from retarget.grip import SQUEEZE, anchored_targets, g1_opposition
 from retarget.ik import G1Retargeter
@@ -36,9 +37,14 @@ def _link_map(clip: HumanClip, mapping) -> dict[str, str]:
 
 
 def retarget_clip(
-    clip: HumanClip, *, height_override: float | None = None, mapping_name: str | None = None
+    clip: HumanClip,
+    *,
+    height_override: float | None = None,
+    mapping_name: str | None = None,
+    variant: Variant | None = None,
 ) -> tuple[RobotClip, dict, dict]:
-    """(robot clip, metrics, scale summary) for one human clip."""
+    """(robot clip, metrics, scale summary) for one human clip; ``variant``: its object varied
+    (:mod:`retarget.augment`), the clip's source then ends in ``@<variant label>``."""
     if clip.frames < 2:
         raise InputError(clip.source, "frames", f"a clip needs at least 2 frames, got {clip.frames}")
     t0 = time.perf_counter()
@@ -51,22 +57,26 @@ def retarget_clip(
     link_map = _link_map(human, mapping)
     links, contacts = link_contact_flags(human, link_map)
     targets = replace(targets, contact_links=links, object_contact=contacts if objects else None)
+    vmap, augmented = None, None
+    if variant is not None and not variant.identity:
+        targets, objects, vmap, augmented = augment(targets, objects, variant, human.source)
     scene = build_scene([SceneObject(o.name, o.geometry, o.physics(), pose=tuple(o.pose[0])) for o in objects])
     ik = G1Retargeter(scene)
     qpos = ik.retarget(targets, {o.name: o.pose for o in objects}, source=human.source)
     field = object_field(human) if objects else None  # the object's distance field, for the hands' faces
     hold = None if field is None else human_hold(human, field=field)
     squeeze = hold[0] if hold is not None and hold[1] <= SQUEEZE else None
-    opposition = None if squeeze is None else g1_opposition(field, qpos, objects, squeeze, human.source)
+    robot_field = field if vmap is None else vmap.variant_field
+    opposition = None if squeeze is None else g1_opposition(robot_field, qpos, objects, squeeze, human.source)
     if opposition is not None and opposition > SQUEEZE:  # the human squeezes it, the scaled G1 does not
-        targets = anchored_targets(human, targets, objects, squeeze)
+        targets = anchored_targets(human, targets, objects, squeeze, carry=None if vmap is None else vmap.carry)
         ik = G1Retargeter(scene)
         qpos = ik.retarget(targets, {o.name: o.pose for o in objects}, source=human.source)
     objects = tuple(replace(o, pose=ik.objects_pose[o.name]) for o in objects)  # moved clear of planted feet
     robot = RobotClip(
         qpos,
         FPS,
-        human.source,
+        human.source if augmented is None else f"{human.source}@{variant.label}",
         objects=objects,
         contact_links=links,
         contacts=contacts,
@@ -81,6 +91,8 @@ def retarget_clip(
             "human_hand_opposition": None if hold is None else hold[1],
             # the G1's before its wrists were anchored on the human's faces (retarget.grip), None: not anchored
             "g1_hand_opposition_scaled": opposition if opposition is not None and opposition > SQUEEZE else None,
+            # the object's variant (retarget.augment): scale, shape, mass rule; the demonstration itself: x1
+            **({} if variant is None else {"augment": augmented or variant.to_dict()}),
         },
     )
     seconds = time.perf_counter() - t0

@@ -15,6 +15,7 @@ residual shows it and physicalize's ``out of reach`` class says so with its dist
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -23,7 +24,7 @@ from scipy.ndimage import distance_transform_edt
 from pipeline.clip import HumanClip, ObjectTrack
 from pipeline.distance.field import ObjectField
 from pipeline.robot import HAND_BODIES
-from pipeline.rotations import quat_mat
+from pipeline.rotations import rotation_from_wxyz
 from pipeline.take import mean_opposition, wrist_normals
 from pipeline.terms.link_motion import link_motion
 from retarget.targets import IKTargets
@@ -43,20 +44,33 @@ def g1_opposition(
 
 
 def anchored_targets(
-    human: HumanClip, targets: IKTargets, objects: tuple[ObjectTrack, ...], frames: np.ndarray
+    human: HumanClip,
+    targets: IKTargets,
+    objects: tuple[ObjectTrack, ...],
+    frames: np.ndarray,
+    carry: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> IKTargets:
     """``targets`` with the G1's wrist targets on the human's wrists carried from the human's object pose to the
-    robot's (module docstring), weight 1 on ``frames`` falling to 0 over :data:`RAMP` frames around them."""
+    robot's (module docstring), weight 1 on ``frames`` falling to 0 over :data:`RAMP` frames around them. ``carry``
+    maps (N, 3) points of the human's object frame onto the robot's object when that is a variant of it
+    (:meth:`retarget.augment.VariantMap.carry`); None: the same object."""
     held = np.zeros(targets.frames, bool)
     held[frames[frames < targets.frames]] = True
     weight = np.clip(1.0 - distance_transform_edt(~held) / (RAMP + 1), 0.0, 1.0)
     h_pose, r_pose = human.objects[0].pose, objects[0].pose
+    t = np.flatnonzero(weight > 0)
     pos = targets.pos.copy()
     for side, wrist in zip(("left", "right"), WRISTS):
         k = targets.body_names.index(f"{side}_wrist_yaw_link")
-        p_h = human.joint_pos[:, human.skeleton.index(wrist)]
-        for t in np.flatnonzero(weight > 0):
-            local = quat_mat(h_pose[t, 3:7]).T @ (p_h[t] - h_pose[t, :3])
-            carried = r_pose[t, :3] + quat_mat(r_pose[t, 3:7]) @ local
-            pos[t, k] = (1 - weight[t]) * pos[t, k] + weight[t] * carried
+        p_h = human.joint_pos[t, human.skeleton.index(wrist)]
+        local = np.einsum("tji,tj->ti", _rot(h_pose[t]), p_h - h_pose[t, :3])
+        if carry is not None:
+            local = carry(local)
+        carried = r_pose[t, :3] + np.einsum("tij,tj->ti", _rot(r_pose[t]), local)
+        pos[t, k] = (1 - weight[t, None]) * pos[t, k] + weight[t, None] * carried
     return replace(targets, pos=pos)
+
+
+def _rot(pose: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) rotation matrices of (T, 7) poses."""
+    return rotation_from_wxyz(pose[:, 3:7]).as_matrix()

@@ -2,6 +2,10 @@
 written as ``datasets/<NAME>/retargeted/`` (LeRobot) with ``report.json``, and per clip an MCAP log and a PNG plot
 (:mod:`retarget.plot`) in ``datasets/<NAME>/logs/retargeted/``.
 
+With ``variants`` (:mod:`retarget.augment`) every clip is retargeted once per variant of its object (the ``x1``
+variant is the clip itself); a variant that cannot be made of a clip (no object; a cylinder of a chair) is listed in
+the report's ``not_applicable`` with its reason, and the report's ``variants`` holds the retarget figures per variant.
+
 The clips are independent: they run in worker processes or on Ray (``jobs``, ``executor``), each kept as it
 finishes so an interrupted run resumes (:mod:`pipeline.stage.run`); a failing clip is reported with its one-line
 error and the others go on. A rerun on the same input with the same options finds the dataset up to date
@@ -28,6 +32,8 @@ from pipeline.stage.inspect_log import write_robot_log
 from pipeline.stage.paths import file_stem, stage_dir
 from pipeline.stage.run import StageRun, digest
 from pipeline.stage.state import files_fingerprint, fingerprint
+from retarget.augment import Variant
+from retarget.augment import not_applicable as augment_not_applicable
 from retarget.clip import FPS, METHOD, retarget_clip
 from retarget.metrics import summarise
 from retarget.plot import plot_clip
@@ -43,21 +49,42 @@ class ClipResult:
     metrics: dict
     scale: dict
     error: str | None = None
+    variant: str | None = None
 
 
-def retarget_one(item: tuple[int, HumanClip], height_override: float | None = None) -> ClipResult:
-    """:func:`retarget_clip` of the ``(index, clip)`` item; a bad clip's :class:`InputError` becomes its result."""
-    index, clip = item
+Item = tuple[int, HumanClip, Variant | None]
+
+
+def retarget_one(item: Item, height_override: float | None = None) -> ClipResult:
+    """:func:`retarget_clip` of the ``(index, clip, variant)`` item; a bad clip's :class:`InputError` becomes its
+    result."""
+    index, clip, variant = item
+    label = None if variant is None else variant.label
     try:
-        robot, metrics, scale = retarget_clip(clip, height_override=height_override)
+        robot, metrics, scale = retarget_clip(clip, height_override=height_override, variant=variant)
     except InputError as exc:  # a bad clip is reported; the others go on
-        return ClipResult(index, clip.source, None, {}, {}, error=str(exc))
-    return ClipResult(index, clip.source, robot, metrics, scale)
+        return ClipResult(index, clip.source, None, {}, {}, error=str(exc), variant=label)
+    return ClipResult(index, robot.source, robot, metrics, scale, variant=label)
 
 
-def _clip_key(k: int, item: tuple[int, HumanClip]) -> str:
-    clip = item[1]
-    return digest(k, clip.source, clip.fps, clip.joint_pos, *(o.pose for o in clip.objects))
+def _clip_key(k: int, item: Item) -> str:
+    clip, variant = item[1], item[2]
+    label = None if variant is None else variant.label
+    return digest(k, clip.source, label, clip.fps, clip.joint_pos, *(o.pose for o in clip.objects))
+
+
+def work_items(clips: Sequence[HumanClip], variants: Sequence[Variant]) -> tuple[list[Item], list[dict]]:
+    """The stage's items: every clip, once per variant (none: once as it is), and the variants that cannot be made
+    of a clip, each ``{"episode", "source", "variant", "reason"}``."""
+    items, skipped = [], []
+    for index, clip in enumerate(clips):
+        for v in variants or (None,):
+            why = None if v is None else augment_not_applicable(clip.objects[0].geometry if clip.objects else None, v)
+            if why is None:
+                items.append((index, clip, v))
+            else:
+                skipped.append({"episode": index, "source": clip.source, "variant": v.label, "reason": why})
+    return items, skipped
 
 
 CARD_NOTES = [
@@ -85,13 +112,26 @@ def feature_frames(features) -> dict[str, str]:
     return {f.name: frames.get(f.name, "world, z-up" if f.name.endswith(".pose") else "") for f in features}
 
 
-def input_fingerprint(source: str, *, body_model: str | None = None, height_override: float | None = None) -> str:
+def input_fingerprint(
+    source: str,
+    *,
+    body_model: str | None = None,
+    height_override: float | None = None,
+    variants: Sequence[Variant] = (),
+) -> str:
     """What a run's output depends on (:mod:`pipeline.stage.state`): the human input's ``source`` fingerprint
-    (:func:`ingest.stage.source_fingerprint`), the body model's, and the height override; not ``jobs``, which changes
-    only the speed."""
+    (:func:`ingest.stage.source_fingerprint`), the body model's, the height override and the variants; not ``jobs``,
+    which changes only the speed."""
     body = files_fingerprint([body_model]) if body_model else None
+    labels = [v.label for v in variants] or None
     return fingerprint(
-        stage="retargeted", method=METHOD, fps=FPS, input=source, body_model=body, height=height_override
+        stage="retargeted",
+        method=METHOD,
+        fps=FPS,
+        input=source,
+        body_model=body,
+        height=height_override,
+        **({"variants": labels} if labels else {}),
     )
 
 
@@ -122,17 +162,18 @@ def run_stage(
     executor: str = "local",
     body_model: str | None = None,
     height_override: float | None = None,
+    variants: Sequence[Variant] = (),
 ) -> dict:
-    """``lessmimic retarget``: retarget every clip of ``human()`` (the human stage, run only when there is work: the
-    CLI passes :func:`ingest.stage.ingest`), write the dataset, report and logs. ``source`` fingerprints the input
-    (:func:`ingest.stage.source_fingerprint`), ``input_label`` names it in the report. Without ``overwrite``, a
-    finished run on the same input with the same options (:func:`input_fingerprint`) is up to date: its report comes
-    back with ``"up_to_date": True`` and nothing is done. The run's resume record is written only after ``human()``
-    has read and validated the input, so a refused input leaves nothing behind."""
+    """``lessmimic retarget``: retarget every clip of ``human()`` (once per variant of ``variants``; the human stage,
+    run only when there is work: the CLI passes :func:`ingest.stage.ingest`), write the dataset, report and logs.
+    ``source`` fingerprints the input (:func:`ingest.stage.source_fingerprint`), ``input_label`` names it in the
+    report. Without ``overwrite``, a finished run on the same input with the same options (:func:`input_fingerprint`)
+    is up to date: its report comes back with ``"up_to_date": True`` and nothing is done. The run's resume record is
+    written only after ``human()`` has read and validated the input, so a refused input leaves nothing behind."""
     check_executor(executor, jobs)
     run = StageRun(
         stage_dir(name, "retargeted"),
-        input_fingerprint(source, body_model=body_model, height_override=height_override),
+        input_fingerprint(source, body_model=body_model, height_override=height_override, variants=variants),
     )
     if not overwrite and (done := run.finished()) is not None:
         return {**done, "up_to_date": True}
@@ -141,9 +182,14 @@ def run_stage(
     clips = list(human())
     run.begin(overwrite)
     retarget = partial(retarget_one, height_override=height_override)
-    results = run.map(retarget, list(enumerate(clips)), key=_clip_key, jobs=jobs, executor=executor, desc="retarget")
+    items, skipped = work_items(clips, variants)
+    results = run.map(retarget, items, key=_clip_key, jobs=jobs, executor=executor, desc="retarget")
     done = [r for r in results if r.robot is not None]
-    failed = [{"episode": r.index, "source": r.source, "error": r.error} for r in results if r.robot is None]
+    failed = [
+        {"episode": r.index, "source": r.source, **({"variant": r.variant} if r.variant else {}), "error": r.error}
+        for r in results
+        if r.robot is None
+    ]
     for r in failed:
         print(f"error: {r['error']}")
     report = {
@@ -151,10 +197,19 @@ def run_stage(
         "method": METHOD,
         "fps": FPS,
         "input": input_label,
-        "clips": [{"source": r.source, "task": r.robot.task, **r.metrics, "scale": r.scale} for r in done],
+        "clips": [
+            {"source": r.source, "task": r.robot.task, **({"variant": r.variant} if r.variant else {}), **r.metrics}
+            | {"scale": r.scale}
+            for r in done
+        ],
         "failed": failed,
         "summary": summarise([r.metrics for r in done]) if done else {},
     }
+    if variants:
+        report["variants"] = {
+            v.label: summarise(m) for v in variants if (m := [r.metrics for r in done if r.variant == v.label])
+        }
+        report["not_applicable"] = skipped
     if not done:  # nothing to write: not a finished run (a rerun tries again)
         return report
     features, episodes = robot_clips_to_episodes([r.robot for r in done])

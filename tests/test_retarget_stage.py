@@ -74,12 +74,12 @@ def test_short_clip_is_reported_and_others_go_on(tmp_path):
         retarget_clip(short)
     run = StageRun(tmp_path / "retargeted", "fp")
     run.begin(overwrite=False)
-    results = run.map(retarget_one, [(0, short), (1, good)], key=_clip_key)
+    results = run.map(retarget_one, [(0, short, None), (1, good, None)], key=_clip_key)
     assert results[0].robot is None and "at least 2 frames" in results[0].error
     assert results[1].robot is not None
     # resume: the finished clip is read back from the cache, identical
     assert len(list(run.clips.glob("*.pkl"))) == 2
-    again = run.map(retarget_one, [(0, short), (1, good)], key=_clip_key)
+    again = run.map(retarget_one, [(0, short, None), (1, good, None)], key=_clip_key)
     np.testing.assert_array_equal(again[1].robot.qpos, results[1].robot.qpos)
 
 

@@ -45,6 +45,13 @@ class Episode:
         return self.simulated.robot.fps
 
 
+def episode_variant(episode: Episode) -> str | None:
+    """The episode's geometry variant (:func:`pipeline.geometry.variant_label`, from its reference's provenance:
+    ``retarget.augment``); None when its corpus was not augmented."""
+    augment = episode.reference.provenance.get("augment")
+    return augment.get("label") if isinstance(augment, dict) else None
+
+
 def load_episodes(name: str, tasks: tuple[str, ...] = TASKS, *, valid_only: bool = True) -> list[Episode]:
     """The episodes of corpus ``name`` whose task is one of ``tasks`` (valid physicalized clips only, unless
     ``valid_only`` is False); a missing dataset or an unknown task is a one-line :class:`InputError`."""

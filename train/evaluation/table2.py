@@ -14,6 +14,15 @@ Every cell also reports ``root_accuracy``, ``R_acc`` (:attr:`train.mdp.tasks.Tas
 an episode's control steps with the root within 0.6 m of the commanded root trajectory), the mean over the cell's
 episodes pooled over the seeds (each episode weighs the same, as each success does).
 
+Two protocols (:attr:`EvalConfig.protocol`, :mod:`train.evaluation.cells`). ``scaled``, the paper's: a cell's
+episodes are the demonstrations, the object scaled by the environment and the command the demonstration's.
+``matched``: a cell's episodes are an augmented corpus's variant at that cell's scale (:mod:`retarget.augment`: its
+object, placement and reference made for that geometry), run as they are; the QP teacher then tracks a reference made
+for the evaluated geometry (the scale-matched teacher). A cell without such episodes is listed under ``"missing"``,
+one whose references the success rule rules out under ``"infeasible"``, each with its reason, and shown ``-``.
+:attr:`EvalConfig.shape` ``cylinder`` runs every cell with the box drawn as a cylinder (``scaled``: by the
+environment; ``matched``: the ``-cylinder`` variants).
+
 An actor may declare ``excluded_tasks`` (a tuple of task names) and ``excluded_reason`` (a sentence) as attributes,
 e.g. a vision policy, whose egocentric camera does not see the seat behind it, excludes SitStand
 (:func:`not_applicable`). Those tasks' cells are not run; the result records them under ``"not_applicable"`` and the
@@ -32,12 +41,17 @@ import numpy as np
 from scipy import stats
 from tqdm import tqdm
 
+from pipeline.dataset.subset import read_subset
+from pipeline.errors import InputError
+from pipeline.geometry import variant_label
 from pipeline.robot import JOINTS_QPOS
 from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
 from pipeline.stage.figure import save_figure
 from train.dagger import read_log
 from train.envs.cpu.env import InteractionEnv
 from train.episodes import TASKS, Episode
+from train.evaluation.cells import cell_episodes, rule_window, variant_yield
+from train.mdp.randomize import Variation
 from train.mdp.tasks import Rules
 
 TABLE2: dict[str, tuple[float, ...]] = {
@@ -62,11 +76,23 @@ class EvalConfig:
     tasks: tuple[str, ...] = TASKS
     scales: tuple[float, ...] | None = None  # only these scales of TABLE2 (None: all)
     rules: Rules = field(default_factory=Rules)
+    protocol: str = "scaled"  # or "matched" (module docstring)
+    shape: str = "box"  # or "cylinder": every cell's box drawn as a circular cylinder
+
+    def __post_init__(self):
+        if self.protocol not in PROTOCOLS:
+            raise InputError(None, "protocol", f"unknown protocol {self.protocol!r} (known: {', '.join(PROTOCOLS)})")
+        if self.shape not in ("box", "cylinder"):
+            raise InputError(None, "shape", f"unknown shape {self.shape!r} (known: box, cylinder)")
+
+
+PROTOCOLS = ("scaled", "matched")
 
 
 def _run(actor, batch: list[Episode], scale: float, rng: np.random.Generator, cfg: EvalConfig) -> list[dict]:
     env = InteractionEnv(actor.env_config(threads=cfg.threads, rules=cfg.rules))
-    env.reset([(e, scale) for e in batch])
+    shape = Variation(cylinder=True) if cfg.shape == "cylinder" and cfg.protocol == "scaled" else None
+    env.reset([(e, scale, shape) for e in batch])
     for s in env.slots:
         q = s.data.qpos.copy()
         q[JOINTS_QPOS] += rng.uniform(-cfg.joint_noise, cfg.joint_noise, JOINTS_QPOS.stop - JOINTS_QPOS.start)
@@ -90,24 +116,40 @@ def not_applicable(actor) -> dict[str, str]:
     return {t: reason for t in tasks}
 
 
-def evaluate(actor, episodes: list[Episode], cfg: EvalConfig = EvalConfig(), label: str = "") -> dict:
+def evaluate(actor, episodes: list[Episode], cfg: EvalConfig = EvalConfig(), label: str = "", corpus: str = "") -> dict:
     """The Table 2 results of ``actor`` on the corpus ``episodes`` (module docstring); the tasks the actor excludes
     are listed, with its reason, as ``"not_applicable": [{"task", "reason"}]`` (only when there are some)."""
     excluded = not_applicable(actor)
     tasks = [t for t in cfg.tasks if t not in excluded]
-    by_task = {t: [e for e in episodes if e.task == t] for t in tasks}
-    cells = [(t, s) for t in tasks for s in TABLE2[t] if by_task[t] and (cfg.scales is None or s in cfg.scales)]
+    cells = {
+        (t, s): cell_episodes(episodes, t, s, cfg.protocol, cfg.shape)
+        for t in tasks
+        for s in TABLE2[t]
+        if cfg.scales is None or s in cfg.scales
+    }
     out = {"label": label, "config": asdict(cfg), "cells": {}}
     if excluded:
         out["not_applicable"] = [{"task": t, "reason": why} for t, why in excluded.items()]
-    for task, scale in tqdm(cells, desc=f"eval {label}", unit="cell"):
+    for (task, scale), (pool, _) in list(cells.items()):
+        name = f"{task}@{scale:g}"
+        if not pool and any(e.task == task for e in episodes):
+            what = "valid episode of the variant" if cfg.protocol == "matched" else "demonstration (x1)"
+            found = variant_yield(corpus, task, variant_label(scale, cfg.shape)) if corpus else ""
+            reason = f"the corpus has no {what}" + (f": {found}" if found else "")
+            out.setdefault("missing", []).append({"cell": name, "reason": reason})
+        elif cfg.protocol == "matched" and (why := rule_window(task, pool, cfg.rules)):
+            out.setdefault("infeasible", []).append({"cell": name, "reason": why})
+            cells[(task, scale)] = ([], 1.0)
+    for (task, scale), (pool, run_scale) in tqdm(
+        [(k, v) for k, v in cells.items() if v[0]], desc=f"eval {label}", unit="cell"
+    ):
         outcomes = []
         for seed in cfg.seeds:
             rng = np.random.default_rng(zlib.crc32(f"{seed}|{task}|{scale}".encode()))
-            pick = rng.choice(len(by_task[task]), cfg.episodes, replace=len(by_task[task]) < cfg.episodes)
+            pick = rng.choice(len(pool), cfg.episodes, replace=len(pool) < cfg.episodes)
             runs = []
             for k in range(0, len(pick), cfg.envs):
-                runs += _run(actor, [by_task[task][i] for i in pick[k : k + cfg.envs]], scale, rng, cfg)
+                runs += _run(actor, [pool[i] for i in pick[k : k + cfg.envs]], run_scale, rng, cfg)
             outcomes.append(runs)
         out["cells"][f"{task}@{scale:g}"] = {
             **summarize_cell(task, scale, outcomes, cfg.seeds),
@@ -170,23 +212,29 @@ def markdown(results: list[dict]) -> str:
     then ``<label>: R_acc``, each cell's mean root tracking accuracy in %. A row of its own rather than a figure in
     each cell (or one mean per row): the cells stay short enough to read across twelve columns, R_acc lines up under
     the success it belongs to, and rows that ran different cells (vision: no SitStand) are compared cell by cell,
-    which a row mean would not do. ``n/a``: a task the actor excludes (the reason is in its result); ``-``: a cell
-    not run. A result written before R_acc (no cell has ``root_accuracy``) has no R_acc row."""
+    which a row mean would not do. ``n/a``: a task the actor excludes (the reason is in its result); ``ruled out``: a
+    cell the success rule rules out for its references, ``no clip``: a cell whose variant the corpus lacks (both with
+    their reasons in ``eval.json``); ``-``: a cell not run. A result written before R_acc (no cell has
+    ``root_accuracy``) has no R_acc row."""
     cols = [(t, s) for t in TASKS for s in TABLE2[t]]
     head = "| | " + " | ".join(f"{t} {s:g}" for t, s in cols) + " |"
     lines = [head, "|---" * (len(cols) + 1) + "|"]
     for r in results:
         na = {x["task"] for x in r.get("not_applicable", ())}
-        found = [(t, r["cells"].get(f"{t}@{s:g}")) for t, s in cols]
+        marks = {x["cell"]: "ruled out" for x in r.get("infeasible", ())} | {
+            x["cell"]: "no clip" for x in r.get("missing", ())
+        }
+        found = [(t, r["cells"].get(f"{t}@{s:g}", marks.get(f"{t}@{s:g}"))) for t, s in cols]
         lines.append(_row(r["label"], found, na, cell_text))
-        if any(c is not None and "root_accuracy" in c for _, c in found):
+        if any(isinstance(c, dict) and "root_accuracy" in c for _, c in found):
             lines.append(_row(f"{r['label']}: R_acc", found, na, accuracy_text))
     return "\n".join(lines) + "\n"
 
 
-def _row(label: str, found: list[tuple[str, dict | None]], na: set[str], text) -> str:
-    """One markdown row: ``text(cell)`` per ``(task, cell)``, ``n/a`` for the tasks in ``na``, ``-`` for no cell."""
-    cells = ["n/a" if t in na else "-" if c is None else text(c) for t, c in found]
+def _row(label: str, found: list[tuple[str, dict | str | None]], na: set[str], text) -> str:
+    """One markdown row: ``text(cell)`` per ``(task, cell)``, ``n/a`` for the tasks in ``na``, a cell's mark (a
+    string) as it is, ``-`` for no cell."""
+    cells = ["n/a" if t in na else "-" if c is None else c if isinstance(c, str) else text(c) for t, c in found]
     return f"| {label} | " + " | ".join(cells) + " |"
 
 
@@ -209,6 +257,7 @@ def scale_note(corpus: str, cfg: EvalConfig, checkpoint: str | Path | None = Non
     checkpoint of the run (``policy_bc.pt``, ``policy_dagger<i>.pt``, a vision student's ``policy_distill<i>.pt``) gets
     its own iterations and windows from the run's log, not the finished run's."""
     note = {"corpus": corpus, "episodes_per_cell_and_seed": cfg.episodes, "seeds": list(cfg.seeds)}
+    note |= {"protocol": cfg.protocol, "shape": cfg.shape}
     if checkpoint is not None:
         checkpoint = Path(checkpoint)
         report = checkpoint.parent / "report.json"
@@ -228,6 +277,9 @@ def scale_note(corpus: str, cfg: EvalConfig, checkpoint: str | Path | None = Non
         if isinstance(scale, dict) and distilled:  # a vision student's intermediate checkpoint
             scale = distill_scale(scale, checkpoint.parent, int(distilled.group(1)))
         note["policy"] = {"checkpoint": str(checkpoint), "training_scale": scale}
+        subset = read_subset(scale["corpus"]) if isinstance(scale, dict) and "corpus" in scale else None
+        if subset is not None:  # trained on some variants of an augmented corpus: the others are held out
+            note["policy"] |= {"trained_variants": subset["variants"], "held_out_variants": subset["held_out"]}
     return note
 
 
@@ -269,6 +321,17 @@ def scale_line(note: dict) -> str:
                 f"{post['envs']} envs, ablation {post['ablation']})"
             )
         line += f" Policy `{policy['checkpoint']}`, trained on {trained}."
+        if "trained_variants" in policy:
+            line += (
+                f" Its corpus holds the object variants {', '.join(policy['trained_variants'])}; held out (never "
+                f"trained on): {', '.join(policy['held_out_variants'])}."
+            )
+    protocol = note.get("protocol", "scaled")
+    line += (
+        " Protocol `matched`: each cell runs the corpus's episodes of the variant at its scale, made for that geometry."
+        if protocol == "matched"
+        else " Protocol `scaled` (the paper's): each cell runs the demonstrations with the object scaled."
+    ) + (" Every box drawn as a circular cylinder." if note.get("shape") == "cylinder" else "")
     return line
 
 

@@ -118,15 +118,12 @@ def stack(variations: list[Variation]) -> dict[str, np.ndarray]:
 
 
 def vary_shape(o: ObjectTrack, v: Variation) -> ObjectTrack:
-    """A primitive box drawn as a circular cylinder along z when ``v.cylinder``: radius the mean of the box's x and y
-    half-extents, the same half-height (both at the box's scale); any other object as it is. Circular so that it is
-    MuJoCo's cylinder primitive on both backends: a cylinder scaled per axis is a collision mesh, which an mjlab
-    world cannot switch to at a restart (:mod:`train.envs.mjlab.object`)."""
+    """A primitive box drawn as a circular cylinder along z when ``v.cylinder``
+    (:meth:`pipeline.geometry.Primitive.as_cylinder`); any other object as it is."""
     g = o.geometry
     if not (v.cylinder and isinstance(g, Primitive) and g.kind == "box"):
         return o
-    hx, hy, hz = (float(h) for h in g.half_extents)
-    return replace(o, geometry=Primitive("cylinder", ((hx + hy) / 2, hz)))
+    return replace(o, geometry=g.as_cylinder())
 
 
 def object_physics(o: ObjectTrack, v: Variation) -> ObjectPhysics:
