@@ -7,7 +7,11 @@ This is the part of the chain every stage shares; the retarget stage starts from
 A synthetic training corpus is named like an input path (:func:`synthetic_corpus`):
 ``synthetic:<seeds>[:<tasks>]``, ``<seeds>`` a comma list of seeds ``S`` and inclusive ranges ``A-B``
 (``synthetic:0-24``, ``synthetic:3``, ``synthetic:0,5,7``), ``<tasks>`` a comma list of the generator's tasks
-(``synthetic:0-24:PickUp,Push``; default: all four).
+(``synthetic:0-24:PickUp,Push``; default: all four), or ``Chain`` alone (``synthetic:0-3:Chain``): per seed ``s``
+one composed clip (:func:`ingest.synthetic.chain_demo`: the fixed order ``CHAIN_ORDERS[s % 12]``, two different
+tasks with the walk between them, two objects; every ordered pair once per 12 seeds), source
+``synthetic:Chain:<A>-<B>:seed<s>``. ``Chain`` does not mix with the single tasks: a dataset's clips hold one
+number of objects.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ from tqdm import tqdm
 
 from ingest import default_input, synthetic
 from ingest.default_input import TASKS, default_clips
+from ingest.synthetic import CHAIN, CHAIN_ORDERS, chain_demo
 from pipeline.clip import HumanClip
 from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.clips import human_clips_to_episodes
@@ -82,23 +87,30 @@ def parse_synthetic_spec(spec: str) -> tuple[tuple[int, ...], tuple[str, ...]]:
     if len(parts) == 2:
         tasks = [t.strip() for t in parts[1].split(",")]
         for t in tasks:
-            if t not in TASKS:
-                raise InputError(spec, "tasks", f"unknown task {t!r} (known: {', '.join(TASKS)})")
+            if t not in TASKS and t != CHAIN:
+                raise InputError(
+                    spec, "tasks", f"unknown task {t!r} (known: {', '.join(TASKS)}) or {CHAIN} (composed clips)"
+                )
         if len(set(tasks)) < len(tasks):
             raise InputError(spec, "tasks", "a task is listed twice")
-    return tuple(seeds), tuple(t for t in TASKS if t in tasks)
+        if CHAIN in tasks and len(tasks) > 1:
+            n = len(CHAIN_ORDERS[0])
+            why = f"its clips hold {n} objects, the single tasks' 1, and a dataset's clips hold one number of objects"
+            raise InputError(spec, "tasks", f"{CHAIN} is a corpus of its own ({why})")
+    return tuple(seeds), tuple(t for t in (*TASKS, CHAIN) if t in tasks)
 
 
 def synthetic_corpus(spec: str, fps: float = 30.0) -> list[HumanClip]:
     """The synthetic clips of ``spec`` (:func:`parse_synthetic_spec`): for every seed ``s``,
     ``default_clips(fps, seed=s)`` filtered to the tasks, each clip (and its objects) with the unique source
-    ``synthetic:<task>:seed<s>``; all labelled synthetic, as the generator makes them."""
+    ``synthetic:<task>:seed<s>``; all labelled synthetic, as the generator makes them. ``Chain``: per seed its
+    composed clip (:func:`ingest.synthetic.chain_demo`), source ``synthetic:Chain:<order>:seed<s>``."""
     seeds, tasks = parse_synthetic_spec(spec)
     clips = []
     for s in seeds:
-        for c in default_clips(fps, seed=s):
+        for c in [chain_demo(fps, seed=s).clip] if tasks == (CHAIN,) else default_clips(fps, seed=s):
             if c.task in tasks:
-                source = f"synthetic:{c.task}:seed{s}"
+                source = f"{c.source}:seed{s}" if c.task == CHAIN else f"synthetic:{c.task}:seed{s}"
                 objects = tuple(replace(o, source=source) for o in c.objects)
                 clips.append(replace(c, source=source, objects=objects))
     return clips

@@ -43,6 +43,12 @@ phases may overlap, never leave gaps):
   1.6-2.6, grasp 2.6-2.85, lift 2.85-3.85, carry 3.85-6.9 (2.1 m: 0.9 m straight, a 90 deg
   left arc of radius 0.5 m, 0.4 m), put_down 6.9-7.9, settle 7.9-8.1, release 8.1-8.7,
   rise 8.3-9.3, stand. The box ends ~1.65 m from where it started.
+
+Composed long-horizon demonstrations (:mod:`ingest.synthetic.compose`, task ``"Chain"``): :func:`composed` strings
+the tasks' segments (the same motions, :data:`~ingest.synthetic.tasks.SEGMENTS`) with the walking between them in
+one clip with one object per segment (``object``, ``object_2``, ...), e.g. Carry, SitStand, Push (~30 s);
+:func:`chain_demo` is a corpus seed's (:data:`CHAIN_ORDERS`: every ordered pair of two tasks). They are not part of
+:func:`default_demos`.
 """
 
 from __future__ import annotations
@@ -50,6 +56,7 @@ from __future__ import annotations
 import numpy as np
 
 from ingest.synthetic.body import HAND_OFFSET, Phase, SyntheticDemo
+from ingest.synthetic.compose import CHAIN, CHAIN_ORDERS, chain_demo, composed
 from ingest.synthetic.skeleton import JOINT_NAMES, PARENTS, SKELETON, SUBJECT_HEIGHT
 from ingest.synthetic.skeleton import OFFSETS as REST_OFFSETS
 from ingest.synthetic.tasks import carry, pickup, push, sit_stand
@@ -70,6 +77,8 @@ def default_clips(fps: float = 30.0, seed: int = 0) -> list[HumanClip]:
 
 
 __all__ = [
+    "CHAIN",
+    "CHAIN_ORDERS",
     "HAND_OFFSET",
     "JOINT_NAMES",
     "PARENTS",
@@ -79,6 +88,8 @@ __all__ = [
     "TASKS",
     "Phase",
     "SyntheticDemo",
+    "chain_demo",
+    "composed",
     "default_clips",
     "default_demos",
 ]
