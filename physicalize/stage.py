@@ -32,6 +32,7 @@ from pipeline.dataset.clips import episodes_to_robot_clips, physicalized_clips_t
 from pipeline.dataset.objects import objects_note
 from pipeline.dataset.write import write_dataset
 from pipeline.errors import InputError
+from pipeline.geometry import provenance_variant
 from pipeline.robot import FREE_NV, NV_ROBOT, ActuatorProfile, actuator_profile
 from pipeline.stage.executor import check_executor
 from pipeline.stage.inspect_log import write_robot_log
@@ -140,13 +141,6 @@ def _checked_teacher(teacher: str, profile: str) -> tuple[TeacherSpec, ActuatorP
     return spec, prof
 
 
-def variant_label(clip: RobotClip) -> str | None:
-    """The clip's geometry variant (:mod:`retarget.augment`: ``x1`` the demonstration itself), None when the corpus
-    was not augmented."""
-    augment = clip.provenance.get("augment")
-    return augment.get("label") if isinstance(augment, dict) else None
-
-
 def yield_table(per_clip: list[dict]) -> dict:
     """Per task and geometry variant (``"PickUp x0.6"``; a corpus without variants: per task): ``clips``, ``valid``,
     and the invalid ones by class, ``rejected`` (the plan refused them: physicalize.feasibility) and ``failed`` (the
@@ -172,7 +166,7 @@ def _report(
             "episode": r.index,
             "source": r.source,
             "task": clips[r.index].task,
-            **({"variant": v} if (v := variant_label(clips[r.index])) else {}),
+            **({"variant": v} if (v := provenance_variant(clips[r.index].provenance)) else {}),
             **r.figures,
         }
         for r in results

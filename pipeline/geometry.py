@@ -179,6 +179,13 @@ def variant_label(scale, shape: str = "box") -> str:
     return size + ("-cylinder" if shape == "cylinder" else "")
 
 
+def provenance_variant(provenance: dict | None) -> str | None:
+    """The variant label a clip's provenance records (``provenance["augment"]["label"]``, written by
+    ``retarget.augment``); None when the clip's corpus was not augmented."""
+    augment = (provenance or {}).get("augment")
+    return augment.get("label") if isinstance(augment, dict) else None
+
+
 def geometry_to_dict(g: ObjectGeometry) -> dict:
     """Plain-JSON description (for dataset cards and episode metadata)."""
     kind = {Primitive: "primitive", MeshGeometry: "mesh", Chair: "chair"}[type(g)]

@@ -58,6 +58,21 @@ def orientation_error(R_ref: np.ndarray, R: np.ndarray) -> np.ndarray:
     return v
 
 
+def pose_rotations(pose: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) rotation matrices of (T, 7) poses ``(x, y, z, qw, qx, qy, qz)``."""
+    return rotation_from_wxyz(pose[:, 3:7]).as_matrix()
+
+
+def to_pose_frame(pose: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """(T, 3) world points ``p`` in the frames of (T, 7) ``pose``: ``R_t^T (p_t - c_t)``."""
+    return np.einsum("tji,tj->ti", pose_rotations(pose), p - pose[:, :3])
+
+
+def from_pose_frame(pose: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """(T, 3) points ``u`` of the frames of (T, 7) ``pose`` in the world: ``c_t + R_t u_t``."""
+    return pose[:, :3] + np.einsum("tij,tj->ti", pose_rotations(pose), u)
+
+
 def quat_mat(q: np.ndarray) -> np.ndarray:
     """The rotation matrix (3, 3) of a unit quaternion ``q`` (wxyz)."""
     R = np.empty(9)

@@ -36,7 +36,7 @@ import numpy as np
 
 from pipeline.clip import HumanClip, Skeleton, check_array
 from pipeline.distance.field import ObjectField
-from pipeline.geometry import MeshGeometry
+from pipeline.geometry import MeshGeometry, ObjectGeometry
 
 SMALL_MOVE_M = 0.25  # an object that rises and travels no more than this barely moves
 SLIDE_RISE_M = 0.10  # an object that rises no more than this, and travels further, slides on the floor
@@ -84,10 +84,14 @@ def hand_joints(skeleton: Skeleton, side: str) -> list[int]:
     return hand
 
 
-def object_field(human: HumanClip, index: int = 0) -> ObjectField:
-    """The distance field of the human clip's object ``index`` (a mesh's field is built without a disk cache)."""
-    geometry = human.objects[index].geometry
+def geometry_field(geometry: ObjectGeometry) -> ObjectField:
+    """The distance field of one clip's object (a mesh's field is built without a disk cache)."""
     return ObjectField.from_geometry(geometry, **({"cache": False} if isinstance(geometry, MeshGeometry) else {}))
+
+
+def object_field(human: HumanClip, index: int = 0) -> ObjectField:
+    """The distance field of the human clip's object ``index`` (:func:`geometry_field`)."""
+    return geometry_field(human.objects[index].geometry)
 
 
 def held_frames(human: HumanClip, field: ObjectField | None = None, index: int = 0) -> np.ndarray:

@@ -48,8 +48,9 @@ from pipeline.clip import ObjectTrack
 from pipeline.collision_mesh import load_mesh
 from pipeline.distance.field import ObjectField
 from pipeline.errors import InputError
-from pipeline.geometry import Chair, MeshGeometry, ObjectGeometry, Primitive, variant_label
-from pipeline.rotations import rotation_from_wxyz
+from pipeline.geometry import Chair, ObjectGeometry, Primitive, variant_label
+from pipeline.rotations import from_pose_frame, pose_rotations, to_pose_frame
+from pipeline.take import geometry_field
 from retarget.mapping import G1_ROLES
 from retarget.objects import object_bottom
 from retarget.targets import IKTargets
@@ -199,7 +200,7 @@ class VariantMap:
         orientation."""
         out = pose.copy()
         shift = self.shift + self.held[: len(pose), None] * self.held_shift
-        out[:, :3] += np.einsum("tij,tj->ti", _rot(pose), shift)
+        out[:, :3] += np.einsum("tij,tj->ti", pose_rotations(pose), shift)
         out[:, 2] += self.dz
         return out
 
@@ -208,8 +209,7 @@ def lifted_weight(track: ObjectTrack) -> np.ndarray:
     """(T,) 0 while the object's lowest point is within 1 cm of where it started, rising to 1 (minimum jerk) as it
     gets :data:`LIFTED_M` above it."""
     rise = object_bottom(track.geometry, track.pose) - object_bottom(track.geometry, track.pose[:1])[0]
-    x = np.clip((rise - 0.01) / (LIFTED_M - 0.01), 0.0, 1.0)
-    return x**3 * (10 - 15 * x + 6 * x**2)
+    return _minjerk((rise - 0.01) / (LIFTED_M - 0.01))
 
 
 def _local(field: ObjectField, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -217,27 +217,28 @@ def _local(field: ObjectField, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(s.phi), np.asarray(s.grad)
 
 
-def _field(g: ObjectGeometry) -> ObjectField:
-    return ObjectField.from_geometry(g, **({"cache": False} if isinstance(g, MeshGeometry) else {}))
-
-
 def _ramp(flags: np.ndarray, frames: int) -> np.ndarray:
     """(T,) weight: 1 on flagged frames, falling to 0 over ``frames`` frames on either side (minimum jerk)."""
     if not flags.any():
         return np.zeros(len(flags))
-    x = np.clip(1.0 - distance_transform_edt(~flags) / (frames + 1), 0.0, 1.0)
+    return _minjerk(1.0 - distance_transform_edt(~flags) / (frames + 1))
+
+
+def _minjerk(x: np.ndarray) -> np.ndarray:
+    """The minimum-jerk blend ``10 x^3 - 15 x^4 + 6 x^5`` of ``x`` clipped to [0, 1]."""
+    x = np.clip(x, 0.0, 1.0)
     return x**3 * (10 - 15 * x + 6 * x**2)
 
 
 def variant_map(track: ObjectTrack, geometry: ObjectGeometry, targets: IKTargets, variant: Variant) -> VariantMap:
     """The map of ``track``'s object to ``geometry`` (its variant), anchored on the contacts of ``targets`` and
     pushed clear of the body (module docstring)."""
-    field, variant_field = _field(track.geometry), _field(geometry)
+    field, variant_field = geometry_field(track.geometry), geometry_field(geometry)
     scale = np.asarray(variant.scale)
     surface = []
     for k in _contact_bodies(targets):
         frames = np.flatnonzero(targets.object_contact[:, k])
-        u = _to_local(track.pose[frames], targets.pos[frames, targets.body_names.index(targets.contact_links[k])])
+        u = to_pose_frame(track.pose[frames], targets.pos[frames, targets.body_names.index(targets.contact_links[k])])
         phi, grad = _local(field, u)
         surface.append(u - phi[:, None] * grad)
     anchor = np.concatenate(surface).mean(axis=0) if surface else np.zeros(3)
@@ -284,9 +285,9 @@ def _cleared(vmap: VariantMap, track: ObjectTrack, targets: IKTargets, carried: 
     if not bodies:
         return vmap
     B = len(bodies)
-    before = _local(vmap.field, _to_local(np.repeat(track.pose, B, 0), targets.pos[:, bodies].reshape(-1, 3)))[0]
+    before = _local(vmap.field, to_pose_frame(np.repeat(track.pose, B, 0), targets.pos[:, bodies].reshape(-1, 3)))[0]
     moved = np.repeat(vmap.pose(track.pose), B, 0)
-    after, grad = _local(vmap.variant_field, _to_local(moved, carried.pos[:, bodies].reshape(-1, 3)))
+    after, grad = _local(vmap.variant_field, to_pose_frame(moved, carried.pos[:, bodies].reshape(-1, 3)))
     need = np.minimum(before, CLEARANCE_M) - after
     lifted = np.repeat(vmap.held, B) >= 0.5
     for part, rows in (("shift", ~lifted), ("held_shift", lifted)):
@@ -298,15 +299,6 @@ def _cleared(vmap: VariantMap, track: ObjectTrack, targets: IKTargets, carried: 
             push = np.array([*(need[i] * away / np.linalg.norm(away)), 0.0])
             vmap = replace(vmap, **{part: getattr(vmap, part) + push})
     return vmap
-
-
-def _rot(pose: np.ndarray) -> np.ndarray:
-    """(T, 3, 3) rotation matrices of (T, 7) poses."""
-    return rotation_from_wxyz(pose[:, 3:7]).as_matrix()
-
-
-def _to_local(pose: np.ndarray, p: np.ndarray) -> np.ndarray:
-    return np.einsum("tji,tj->ti", _rot(pose), p - pose[:, :3])
 
 
 def carried_targets(targets: IKTargets, track: ObjectTrack, vmap: VariantMap) -> IKTargets:
@@ -322,8 +314,8 @@ def carried_targets(targets: IKTargets, track: ObjectTrack, vmap: VariantMap) ->
         b = targets.body_names.index(link)
         w = _ramp(targets.object_contact[:, k], ramp)
         t = np.flatnonzero(w > 0)
-        u = _to_local(track.pose[t], targets.pos[t, b])
-        d = pose[t, :3] + np.einsum("tij,tj->ti", _rot(pose[t]), vmap.carry(u)) - targets.pos[t, b]
+        u = to_pose_frame(track.pose[t], targets.pos[t, b])
+        d = from_pose_frame(pose[t], vmap.carry(u)) - targets.pos[t, b]
         pos[t, b] += w[t, None] * d
         lead_dz[t] += w[t] * d[:, 2]
         lead_w[t] += w[t]

@@ -24,7 +24,7 @@ from scipy.ndimage import distance_transform_edt
 from pipeline.clip import HumanClip, ObjectTrack
 from pipeline.distance.field import ObjectField
 from pipeline.robot import HAND_BODIES
-from pipeline.rotations import rotation_from_wxyz
+from pipeline.rotations import from_pose_frame, to_pose_frame
 from pipeline.take import mean_opposition, wrist_normals
 from pipeline.terms.link_motion import link_motion
 from retarget.targets import IKTargets
@@ -63,14 +63,9 @@ def anchored_targets(
     for side, wrist in zip(("left", "right"), WRISTS):
         k = targets.body_names.index(f"{side}_wrist_yaw_link")
         p_h = human.joint_pos[t, human.skeleton.index(wrist)]
-        local = np.einsum("tji,tj->ti", _rot(h_pose[t]), p_h - h_pose[t, :3])
+        local = to_pose_frame(h_pose[t], p_h)
         if carry is not None:
             local = carry(local)
-        carried = r_pose[t, :3] + np.einsum("tij,tj->ti", _rot(r_pose[t]), local)
+        carried = from_pose_frame(r_pose[t], local)
         pos[t, k] = (1 - weight[t, None]) * pos[t, k] + weight[t, None] * carried
     return replace(targets, pos=pos)
-
-
-def _rot(pose: np.ndarray) -> np.ndarray:
-    """(T, 3, 3) rotation matrices of (T, 7) poses."""
-    return rotation_from_wxyz(pose[:, 3:7]).as_matrix()

@@ -19,7 +19,7 @@ from pipeline.clip import ObjectTrack, PhysicalizedClip, RobotClip
 from pipeline.dataset.clips import episodes_to_physicalized_clips, episodes_to_robot_clips
 from pipeline.dataset.read import dataset_actuator_profile
 from pipeline.errors import InputError
-from pipeline.geometry import Primitive
+from pipeline.geometry import Primitive, provenance_variant
 from pipeline.robot import DEFAULT_PROFILE
 from pipeline.stage.paths import stage_dir
 
@@ -48,8 +48,7 @@ class Episode:
 def episode_variant(episode: Episode) -> str | None:
     """The episode's geometry variant (:func:`pipeline.geometry.variant_label`, from its reference's provenance:
     ``retarget.augment``); None when its corpus was not augmented."""
-    augment = episode.reference.provenance.get("augment")
-    return augment.get("label") if isinstance(augment, dict) else None
+    return provenance_variant(episode.reference.provenance)
 
 
 def load_episodes(name: str, tasks: tuple[str, ...] = TASKS, *, valid_only: bool = True) -> list[Episode]:

@@ -18,6 +18,7 @@ from dataclasses import replace
 from pipeline.dataset.read import iter_episodes, read_card, read_episode_meta, read_features, read_info
 from pipeline.dataset.write import write_dataset
 from pipeline.errors import InputError
+from pipeline.geometry import provenance_variant
 from pipeline.stage.atomic import write_json_atomic
 from pipeline.stage.paths import stage_dir
 
@@ -25,17 +26,11 @@ STAGES = ("retargeted", "physicalized", "features")  # what a training run reads
 SUBSET_FILE = "subset.json"
 
 
-def variant_of(meta: dict) -> str | None:
-    """An episode's geometry variant label from its dataset meta; None when its corpus was not augmented."""
-    augment = (meta.get("provenance") or {}).get("augment")
-    return augment.get("label") if isinstance(augment, dict) else None
-
-
 def corpus_variants(name: str) -> list[str]:
     """The variant labels of corpus ``name`` (its retargeted dataset), in first-seen order."""
     root = stage_dir(name, "retargeted")
     read_info(root)  # a missing dataset is its one-line error
-    labels = [variant_of(m) for m in read_episode_meta(root)]
+    labels = [provenance_variant(m.get("provenance")) for m in read_episode_meta(root)]
     if None in labels:
         raise InputError(root, "provenance.augment", "this corpus was not augmented (retarget --augment-scales)")
     return list(dict.fromkeys(labels))
@@ -63,7 +58,7 @@ def subset_corpus(name: str, out: str, variants: Sequence[str], *, overwrite: bo
     for stage in STAGES:
         src = stage_dir(name, stage)
         info, card = read_info(src), read_card(src)
-        kept = (e for e in iter_episodes(src) if variant_of(e.meta) in keep)
+        kept = (e for e in iter_episodes(src) if provenance_variant(e.meta.get("provenance")) in keep)
         note = f"A subset of corpus `{name}`: the geometry variants {', '.join(keep)}; held out {', '.join(held)}."
         write_dataset(
             tmp / stage,
