@@ -148,7 +148,8 @@ def _cmd_physicalize(a: argparse.Namespace) -> int:
     if any(" " in key for key in report.get("yield", {})):  # an augmented corpus: the yield per task and variant
         for key, row in report["yield"].items():
             why = {**row["rejected"], **row["failed"]}
-            print(f"  {key}: {row['valid']}/{row['clips']} valid" + (f" ({_counts(why)})" if why else ""))
+            capped = f", {row['payload_capped']} with the object capped" if row.get("payload_capped") else ""
+            print(f"  {key}: {row['valid']}/{row['clips']} valid{capped}" + (f" ({_counts(why)})" if why else ""))
     return 0  # invalid clips are a measured outcome (in the report), not a failure of the run
 
 

@@ -22,6 +22,7 @@ from physicalize.feasibility import (
     rejection,
     rejection_reason,
 )
+from physicalize.payload import capped, held_objects, load_scale
 from physicalize.problem import object_qpos, tracking_problem
 from physicalize.rollout import Rollout, initial_state, replay, simulate
 from physicalize.start import clean_start, prefix_frames
@@ -31,6 +32,7 @@ from physicalize.wbc import WholeBodyController
 from physicalize.wbc_config import TEACHER_GAINS, WBCConfig
 from pipeline.clip import RobotClip
 from pipeline.errors import InputError
+from pipeline.geometry import provenance_variant
 from pipeline.robot import FREE_NQ, NQ_ROBOT
 from pipeline.take import take_kind
 
@@ -118,6 +120,18 @@ def _reference_figures(scene, ref, clip: RobotClip) -> tuple[dict, str]:
     return figures, cause  # a cause no controller can overcome
 
 
+def _payload_capped(clip: RobotClip, scene, ref) -> tuple[RobotClip, dict] | None:
+    """``clip`` with its held objects as heavy as the upper body can hold in the reference's poses, and the
+    ``payload_capped`` figure (:mod:`physicalize.payload`); None when the clip is not a geometry variant (its
+    object's mass is the world's), nothing is held or the poses alone are over."""
+    if provenance_variant(clip.provenance) in (None, "x1"):
+        return None
+    if ref.grasp is None or not (held := held_objects(ref.grasp.obj)):
+        return None
+    k = load_scale(ref.qpos, (ref.grasp.offset, ref.grasp.force), scene.profile.effort_limit)
+    return capped(clip, held, k) if 0.0 < k < 1.0 else None
+
+
 def _figures(
     scene, roll: Rollout, clip: RobotClip, objects, qpos0, qvel0, perturb, reference: tuple[dict, str]
 ) -> dict:
@@ -174,6 +188,12 @@ def physicalize_clip(
     qpos0, qvel0 = initial_state(scene, ref, objects)
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0  # planning + tracking (not the checks)
     ref_figures = _reference_figures(scene, ref, clip)
+    if ref_figures[0]["reference_static_torque_ratio_max"] > 1.0 and (lighter := _payload_capped(clip, scene, ref)):
+        clip, payload = lighter  # what the hands hold, as heavy as the motors can hold (physicalize.payload)
+        scene, ref, objects, zmp = tracking_problem(clip, profile, reference, grasp)
+        qpos0, qvel0 = initial_state(scene, ref, objects)
+        ref_figures = _reference_figures(scene, ref, clip)
+        ref_figures[0].update(payload)
     if (rejected := rejection(ref_figures[0])) is not None:
         return None, None, _rejected(ref_figures[0], rejected), {}
     holds = ref.grasp is not None and bool(ref.grasp.grasped.any())

@@ -144,13 +144,15 @@ def _checked_teacher(teacher: str, profile: str) -> tuple[TeacherSpec, ActuatorP
 def yield_table(per_clip: list[dict]) -> dict:
     """Per task and geometry variant (``"PickUp x0.6"``; a corpus without variants: per task): ``clips``, ``valid``,
     and the invalid ones by class, ``rejected`` (the plan refused them: physicalize.feasibility) and ``failed`` (the
-    simulation did not hold: physicalize.validate), so a reader sees where the robot's own limits are."""
+    simulation did not hold: physicalize.validate), so a reader sees where the robot's own limits are;
+    ``payload_capped``: the valid ones whose held object was made lighter for the motors (physicalize.payload)."""
     out: dict[str, dict] = {}
     for c in per_clip:
         key = " ".join(k for k in (c.get("task") or "no task", c.get("variant")) if k)
-        row = out.setdefault(key, {"clips": 0, "valid": 0, "rejected": {}, "failed": {}})
+        row = out.setdefault(key, {"clips": 0, "valid": 0, "payload_capped": 0, "rejected": {}, "failed": {}})
         row["clips"] += 1
         row["valid"] += bool(c["valid"])
+        row["payload_capped"] += bool(c["valid"] and c.get("payload_capped"))
         for kind in ("rejected", "failure"):
             if why := c.get(kind):
                 table = row["rejected" if kind == "rejected" else "failed"]

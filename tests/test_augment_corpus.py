@@ -74,6 +74,7 @@ def test_the_physicalize_report_counts_the_yield_per_task_and_variant(root):
         runs = [c for c in report["clips"] if f"{c['task']} {c['variant']}" == key]
         assert row["clips"] == len(runs) == 1 and row["valid"] == sum(c["valid"] for c in runs)
         assert row["valid"] + sum(row["rejected"].values()) + sum(row["failed"].values()) == row["clips"]
+        assert row["payload_capped"] == sum(c["valid"] and "payload_capped" in c for c in runs)
     kept = episodes_to_physicalized_clips(stage_dir("aug", "physicalized"))
     assert {c.robot.source.split("@")[-1] for c in kept} <= {
         "synthetic:PickUp:seed0",

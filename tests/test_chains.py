@@ -127,3 +127,17 @@ def test_the_eval_command_adds_the_chains_table(corpus, tmp_path):
     saved = json.loads((tmp_path / "chains.json").read_text())
     assert list(saved["result"]["lengths"]) == ["1", "2"] and saved["scale"]["policy"]["checkpoint"] == str(policy)
     assert "Chains: 2 per length and seed, seeds 0" in (tmp_path / "chains.md").read_text()
+
+
+def test_the_qp_teachers_chains_track_each_tasks_own_reference(corpus, tmp_path):
+    """``eval --teacher --chains``: the QP teacher's chains (its ceiling) in ``qp_teacher/``; at each switch the
+    teacher is rebound to the next task's relocated reference, so it completes the first task of every chain."""
+    import json
+
+    from lessmimic.cli import main
+
+    args = ["eval", "--name", "train", "--teacher", "--seeds", "0", "--episodes", "1", "--envs", "2", "--scales", "1.0"]
+    assert main([*args, "--chains", "2", "--chains-per-seed", "2", "--out", str(tmp_path)]) == 0
+    saved = json.loads((tmp_path / "qp_teacher" / "chains.json").read_text())["result"]
+    assert saved["label"] == "QP teacher, each task's reference"
+    assert saved["lengths"]["2"]["mean_tasks_completed"] >= 1.0

@@ -72,6 +72,13 @@ class TeacherActor:
     def observe(self, obs: Obs) -> None:
         pass
 
+    def rebind(self, env: InteractionEnv, i: int) -> None:
+        """Environment ``i`` went on with another episode (a chain's next task): its teacher tracks that one."""
+        s = env.slots[i]
+        if id(s.episode) not in self._refs:
+            self._refs[id(s.episode)] = episode_reference(s.episode)
+        self.teachers[i] = Teacher(s.episode, s.scene.model, ref=self._refs[id(s.episode)])
+
     def act(self, env: InteractionEnv) -> np.ndarray:
         out = np.zeros((env.num_envs, 29))
         for i, (s, teacher) in enumerate(zip(env.slots, self.teachers)):

@@ -33,7 +33,7 @@ from pipeline.rotations import rotation_from_wxyz, xyzw_to_wxyz
 from pipeline.stage.atomic import write_bytes_atomic, write_json_atomic
 from pipeline.terms.observations import heading_yaw
 from train.envs.cpu.env import InteractionEnv, control_steps
-from train.episodes import Episode
+from train.episodes import Episode, episode_variant
 from train.evaluation.table2 import accuracy_text, cell_text, interval95, not_applicable
 
 CHAIN_LENGTHS = (5, 10, 15, 25, 40)
@@ -96,6 +96,9 @@ def _switch(env: InteractionEnv, actor, i: int, nxt: Episode) -> None:
     slot = env.slots[i]
     slot.set_state(q, v)
     slot.last_action = last
+    if hasattr(actor, "rebind"):  # the QP teacher: a teacher for the next task's reference, no history
+        actor.rebind(env, i)
+        return
     fresh = env.observe()
     for key, value in vars(fresh).items():
         actor.history.terms[key][i, -1] = value[i]
@@ -150,7 +153,7 @@ def evaluate_chains(actor, episodes: list[Episode], cfg: ChainConfig = ChainConf
     excluded = not_applicable(actor)
     by_task: dict[str, list[Episode]] = {}
     for e in episodes:
-        if e.task not in excluded:
+        if e.task not in excluded and episode_variant(e) in (None, "x1"):  # an augmented corpus: its 1.0x clips
             by_task.setdefault(e.task, []).append(e)
     if not by_task:
         raise ValueError(f"no episode of a task the actor attempts (it excludes {sorted(excluded)})")
