@@ -23,7 +23,7 @@ RUN_ARGS = -j $(JOBS) --executor $(EXECUTOR)
 export HF_HUB_OFFLINE := 1
 export TOKENIZERS_PARALLELISM := false
 
-.PHONY: install lint format retarget import physicalize train-residual features corpus subset train-bc train-aip eval test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-train bench-train-mjlab bench-features bench-export bench-vision bench-vision-mjlab export distill clean-venv
+.PHONY: install lint format retarget import physicalize train-residual features corpus subset train-bc train-aip eval test test-fast bench bench-retarget bench-physicalize bench-physicalize-real bench-train bench-train-mjlab bench-features bench-export bench-vision bench-vision-mjlab bench-export-motion export export-motion distill clean-venv
 
 install: $(VENV)/.installed
 
@@ -161,6 +161,16 @@ EXPORT_ARGS ?=
 export: install
 	$(CLI) export --policy $(POLICY) --format $(FORMAT) $(EXPORT_ARGS)
 
+# A dataset's G1 motions for other trainers (motion_export/): the valid episodes of datasets/$(NAME)/physicalized/ as
+# FORMAT=mjlab-npz (default here: mjlab's tracking task / BeyondMimic), hdmi (motion.npz + meta.json folders), gmr (.pkl)
+# or unitree-csv (Unitree's G1 CSV, resampled to 30 Hz), each with a JSON sidecar (gains, physics, object, validity),
+# into datasets/$(NAME)/export/$(FORMAT)/; MOTION_ARGS="--episode 3", "--all" (invalid ones too), "--stage retargeted",
+# "--out DIR"; OVERWRITE=1 replaces an earlier export.
+MOTION_FORMAT = $(if $(filter file,$(origin FORMAT)),mjlab-npz,$(FORMAT))
+MOTION_ARGS ?=
+export-motion: install
+	$(CLI) export-motion --name $(NAME) --format $(MOTION_FORMAT) $(if $(OVERWRITE),--overwrite) $(MOTION_ARGS)
+
 # ruff (pinned in the dev extras, configured in pyproject.toml): `make format` rewrites, `make lint` checks.
 lint: install
 	$(VENV)/bin/ruff check .
@@ -207,6 +217,11 @@ bench-features: install
 # latency of one call; POLICY a trained policy.pt.
 bench-export: install
 	$(PY) bench/bench_export.py --policy $(POLICY) --name $(CORPUS)
+
+# Motion export per format (bench/bench_export_motion.py): file size and frames written per second over the valid
+# episodes of datasets/$(CORPUS)/physicalized/.
+bench-export-motion: install
+	$(PY) bench/bench_export_motion.py --name $(CORPUS)
 
 # The vision stage's speed (bench/bench_vision.py); POLICY (or RUN) a MoCap policy.pt, default runs/adam_seed0/policy.pt.
 bench-vision: install

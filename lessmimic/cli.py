@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from lessmimic.corpus_commands import add_corpus
+from lessmimic.export_commands import add_export_motion
 from lessmimic.train_commands import add_train
 from pipeline.errors import InputError
 from pipeline.stage.executor import EXECUTORS
@@ -399,6 +400,7 @@ def build_parser() -> argparse.ArgumentParser:
     adders = (_add_retarget, _add_import, _add_physicalize, _add_residual, _add_features, add_train, add_corpus)
     for add in (*adders, _add_tools):
         add(sub)
+    add_export_motion(sub)
     return ap
 
 

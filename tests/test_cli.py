@@ -15,7 +15,18 @@ def test_help_lists_every_command():
     out = subprocess.run(
         [sys.executable, "-m", "lessmimic.cli", "--help"], capture_output=True, text=True, check=True
     ).stdout
-    for cmd in ("retarget", "physicalize", "features", "inspect", "load", "publish", "merge"):
+    for cmd in (
+        "retarget",
+        "physicalize",
+        "features",
+        "inspect",
+        "load",
+        "publish",
+        "merge",
+        "subset",
+        "eval",
+        "export-motion",
+    ):
         assert cmd in out
 
 

@@ -100,7 +100,7 @@ def test_npz_kinds_and_robot_dispatch(tmp_path):
     expect_input_error(lambda: read_robot_clip(k), tmp_path, file=k, field="joint_pos", match="not a G1 motion")
     b = tmp_path / "walk.bvh"
     b.write_text(BVH)
-    expect_input_error(lambda: read_robot_clip(b), tmp_path, file=b, field="suffix", match="expected .npz or .pkl")
+    expect_input_error(lambda: read_robot_clip(b), tmp_path, file=b, field="suffix", match=".npz, .pkl or .csv")
 
 
 def _npy(header: bytes, data: bytes) -> bytes:
@@ -172,3 +172,29 @@ def test_shared_folders(tmp_path):
     expect_input_error(lambda: read_clips(tmp_path), tmp_path, file=tmp_path / "sub3_largebox_003.pt", field="mesh")
     (clip,) = read_clips(tmp_path, mesh=SHARED_MOCAP / "omomo" / "largebox.obj")
     assert clip.objects[0].geometry.path.endswith("largebox.obj")
+
+
+def test_csv_dispatch_by_content(tmp_path):
+    """A ``.csv`` of 36 numbers a row without a header is a Unitree G1 motion (read_robot_clip, skipped by the human
+    readers inside a folder, refused alone); one with a header row stays a keypoints clip; ``fmt=`` names the format
+    where the content would not (a robot CSV with a header)."""
+    from pipeline.readers import csv_kind
+
+    rows = np.zeros((3, 36))
+    rows[:, 6] = 1.0  # quaternion xyzw = identity
+    robot = tmp_path / "g1.csv"
+    np.savetxt(robot, rows, delimiter=",")
+    keys = tmp_path / "keys.csv"
+    keys.write_text("time,a_x,a_y,a_z\n0,0,0,1\n0.1,0,0,1\n")
+    assert (csv_kind(robot), csv_kind(keys)) == ("robot", "keypoints")
+    clip = read_robot_clip(robot)
+    assert clip.fps == 30 and clip.frames == 3 and read_robot_clip(robot, fps=50).fps == 50
+    np.testing.assert_allclose(clip.qpos[:, 3:7], [[1, 0, 0, 0]] * 3)
+    assert [c.source.split("/")[-1] for c in read_clips(tmp_path)] == ["keys.csv"]
+    expect_input_error(lambda: read_clips(robot), tmp_path, file=robot, field="columns", match="read_robot_clip")
+    assert [c.frames for c in read_robot_clips(tmp_path)] == [3]
+    expect_input_error(lambda: read_robot_clip(keys), tmp_path, file=keys, field="columns", match="Unitree G1 CSV")
+    named = tmp_path / "named.txt"
+    named.write_text(",".join(f"c{k}" for k in range(36)) + "\n" + robot.read_text())
+    assert read_robot_clip(named, fmt="unitree-csv").frames == 3
+    expect_input_error(lambda: read_robot_clip(named, fmt="bvh"), tmp_path, file=named, field="format")

@@ -10,7 +10,7 @@ from mocap_paths import SHARED_MOCAP, expect_input_error, needs_shared
 
 from pipeline.geometry import MeshGeometry
 from pipeline.readers import read_robot_clips
-from pipeline.readers.peers import read_beyondmimic_npz, read_gmr_pkl, read_hdmi_motion
+from pipeline.readers.peers import read_beyondmimic_npz, read_gmr_pkl, read_hdmi_motion, read_unitree_csv
 from pipeline.robot import G1_JOINT_NAMES, actuator_profile, g1_model
 from pipeline.rotations import xyzw_to_wxyz
 
@@ -226,3 +226,37 @@ def test_hdmi_unreadable_motion_npz_is_one_line(tmp_path):
     bm = tmp_path / "bm.npz"
     bm.write_bytes(b"")
     expect_input_error(lambda: read_beyondmimic_npz(bm), tmp_path, file=bm, field="file", match="empty")
+
+
+def _unitree_rows(T=4):
+    """Unitree CSV rows (root xyz, quaternion xyzw, 29 joints) and the qpos they stand for."""
+    rng = np.random.default_rng(1)
+    qpos = np.zeros((T, 36))
+    qpos[:, :3] = [0.1, 0.2, 0.78]
+    yaw = 0.2 * np.arange(T)
+    qpos[:, 3], qpos[:, 6] = np.cos(yaw / 2), np.sin(yaw / 2)
+    qpos[:, 7:] = 0.1 * rng.standard_normal((T, 29))
+    rows = np.concatenate([qpos[:, :3], qpos[:, [4, 5, 6, 3]], qpos[:, 7:]], axis=1)
+    return rows, qpos
+
+
+def test_unitree_csv(tmp_path):
+    """Unitree's G1 CSV: 36 numbers a row, quaternion xyzw, 30 Hz unless told; a header row of names is skipped; a
+    short row or a word is one line naming its row."""
+    rows, qpos = _unitree_rows()
+    p = tmp_path / "walk.csv"
+    np.savetxt(p, rows, delimiter=",", fmt="%.17g")
+    r = read_unitree_csv(p)
+    assert r.fps == 30 and r.frames == 4 and r.method == "peer:unitree_csv"
+    np.testing.assert_allclose(r.qpos, qpos, atol=1e-12)
+    assert read_unitree_csv(p, fps=50).fps == 50
+    h = tmp_path / "header.csv"
+    h.write_text(",".join(f"c{k}" for k in range(36)) + "\n" + p.read_text())
+    np.testing.assert_allclose(read_unitree_csv(h).qpos, r.qpos)
+    lines = p.read_text().splitlines()
+    s = tmp_path / "short.csv"
+    s.write_text("\n".join([*lines[:2], lines[2].rsplit(",", 1)[0], lines[3]]) + "\n")
+    expect_input_error(lambda: read_unitree_csv(s), tmp_path, file=s, field="row 3", frame=2, match="35 columns")
+    w = tmp_path / "word.csv"
+    w.write_text("\n".join([lines[0], lines[1].replace(",", ",x", 1)]) + "\n")
+    expect_input_error(lambda: read_unitree_csv(w), tmp_path, file=w, field="row 2", frame=1, match="not a number")

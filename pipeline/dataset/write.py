@@ -24,9 +24,7 @@ write of ``<name>`` removes such folders whose process is gone).
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import uuid
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
@@ -51,6 +49,7 @@ from pipeline.dataset.schema import (
     validate_repo_id,
 )
 from pipeline.errors import InputError
+from pipeline.stage.atomic import remove_dead_staging, replace_folder, staging_folder
 
 _FLUSH_ROWS = 200_000
 
@@ -229,30 +228,7 @@ def check_target(root: Path, overwrite: bool) -> None:
 def _commit(staging: Path, root: Path, overwrite: bool) -> None:
     """Move the finished staging folder to ``root`` (replacing an old dataset only if ``overwrite``)."""
     check_target(root, overwrite)
-    old = None
-    if root.exists():
-        old = root.parent / f".{root.name}.old-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-        os.replace(root, old)
-    try:
-        os.replace(staging, root)
-    except BaseException:
-        if old is not None:
-            os.replace(old, root)
-        raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-
-
-def _remove_dead_staging(root: Path) -> None:
-    """Delete ``.<name>.staging-<pid>-*`` folders left by killed writers (their pid no longer runs)."""
-    for old in root.parent.glob(f".{root.name}.staging-*-*"):
-        try:
-            pid = int(old.name.rsplit("-", 2)[1])
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            shutil.rmtree(old, ignore_errors=True)
-        except (ValueError, PermissionError):
-            continue
+    replace_folder(staging, root)
 
 
 def write_dataset(
@@ -285,8 +261,8 @@ def write_dataset(
         raise InputError(repo_id, "card fps", f"{card.fps} differs from the dataset fps {fps}")
     check_target(root, overwrite)
     root.parent.mkdir(parents=True, exist_ok=True)
-    _remove_dead_staging(root)
-    staging = root.parent / f".{root.name}.staging-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    remove_dead_staging(root)
+    staging = staging_folder(root)
     try:
         staging.mkdir()
         _write_into(staging, repo_id, int(fps), features, episodes, robot_type, card, data_file_size_mb, chunks_size)

@@ -10,16 +10,20 @@ suffix     reader
            [T,36|29]`` -> a peer's G1 motion (:func:`read_robot_clip`, not a human clip)
 ``.c3d``   :func:`~pipeline.readers.c3d.read_c3d` (labelled markers)
 ``.mcap``  :func:`~pipeline.readers.mcap_reader.read_mcap` (transform / rigid-body streams)
-``.csv``   :func:`~pipeline.readers.keypoints.read_keypoints_csv`
+``.csv``   by its content (:func:`csv_kind`): a header row -> keypoints
+           (:func:`~pipeline.readers.keypoints.read_keypoints_csv`); rows of 36 numbers and no header ->
+           a Unitree G1 motion (:func:`read_robot_clip`, not a human clip)
 ``.pkl``   GMR robot motion, through :func:`read_robot_clip` only
 =========  ====================================================================================
 
-G1 motions (peers' retargeting: BeyondMimic/mjlab ``.npz``, GMR ``.pkl``, HDMI ``motion.npz`` + ``meta.json``
-folders) are read by :func:`read_robot_clip` / :func:`read_robot_clips` (:mod:`pipeline.readers.peers`).
+G1 motions (peers' retargeting: BeyondMimic/mjlab ``.npz``, GMR ``.pkl``, Unitree ``.csv``, HDMI ``motion.npz`` +
+``meta.json`` folders) are read by :func:`read_robot_clip` / :func:`read_robot_clips` (:mod:`pipeline.readers.peers`);
+``fmt=`` (one of :data:`ROBOT_FORMATS`) names the format where the suffix or content would not (e.g. a Unitree CSV
+with a header row).
 
 A folder yields every clip inside it and in its direct sub-folders, sorted by relative path.
 Files that are not human clips are skipped there: other suffixes (meshes, ``height_dict.pkl``),
-peers' robot ``.npz``, ``.npz`` files with none of the keys above, and ``.mcap`` files without a
+peers' robot ``.npz`` and ``.csv``, ``.npz`` files with none of the keys above, and ``.mcap`` files without a
 transform stream (e.g. inspection logs). Any other problem in a clip is an error, as for a file; an empty,
 truncated or corrupt ``.npz`` is a one-line :class:`~pipeline.errors.InputError` naming it
 (:func:`~pipeline.readers.keypoints.open_npz`, through which every ``.npz`` reader opens its file).
@@ -30,6 +34,7 @@ truncated or corrupt ``.npz`` is a one-line :class:`~pipeline.errors.InputError`
 
 from __future__ import annotations
 
+import csv
 import warnings
 from pathlib import Path
 
@@ -39,7 +44,9 @@ from pipeline.geometry import ObjectGeometry
 from pipeline.readers.keypoints import open_npz
 
 HUMAN_SUFFIXES = (".bvh", ".pt", ".npz", ".c3d", ".mcap", ".csv")
-ROBOT_SUFFIXES = (".npz", ".pkl")
+ROBOT_SUFFIXES = (".npz", ".pkl", ".csv")
+ROBOT_FORMATS = ("beyondmimic-npz", "gmr-pkl", "unitree-csv")  #: ``read_robot_clip(fmt=...)``
+_SUFFIX_FORMAT = dict(zip(ROBOT_SUFFIXES, ROBOT_FORMATS))
 
 
 class _NotHuman(InputError):
@@ -57,6 +64,23 @@ def npz_kind(path: str | Path) -> str | None:
         if "joint_pos" in keys:
             return "keypoints" if d["joint_pos"].ndim == 3 else "robot"
     return None
+
+
+def csv_kind(path: str | Path) -> str:
+    """``"robot"`` when a ``.csv``'s first non-empty row is 36 numbers (Unitree's G1 layout: no header), else
+    ``"keypoints"`` (a header row of names); an unreadable file is a one-line :class:`InputError`."""
+    from pipeline.readers.peers import UNITREE_CSV_COLUMNS
+
+    try:
+        with open(path, newline="") as f:
+            first = next((r for r in csv.reader(f) if any(c.strip() for c in r)), [])
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(path, "file", f"not a readable CSV file ({exc})") from None
+    try:
+        numbers = [float(c) for c in first]
+    except ValueError:
+        return "keypoints"
+    return "robot" if len(numbers) == UNITREE_CSV_COLUMNS else "keypoints"
 
 
 def read_clip(
@@ -84,6 +108,13 @@ def read_clip(
     if suffix == ".csv":
         from pipeline.readers.keypoints import read_keypoints_csv
 
+        if csv_kind(path) == "robot":
+            raise _NotHuman(
+                path,
+                "columns",
+                "36 numbers a row and no header: a G1 robot motion (Unitree CSV), not a human clip: read it with "
+                "read_robot_clip",
+            )
         return read_keypoints_csv(path, fps=fps)
     if suffix == ".npz":
         return _read_npz(path, body_model, fps)
@@ -153,27 +184,34 @@ def read_robot_clip(
     object_scale: float = 1.0,
     object_name: str | None = None,
     joint_names: list[str] | None = None,
+    fmt: str | None = None,
+    fps: float | None = None,
 ) -> RobotClip:
-    """A peer's G1 motion: BeyondMimic/mjlab ``.npz`` or GMR ``.pkl`` (see :mod:`pipeline.readers.peers`)."""
-    from pipeline.readers.peers import read_beyondmimic_npz, read_gmr_pkl
+    """A peer's G1 motion: BeyondMimic/mjlab ``.npz``, GMR ``.pkl`` or Unitree ``.csv`` (see
+    :mod:`pipeline.readers.peers`), by suffix (and a CSV's content), or by ``fmt`` (:data:`ROBOT_FORMATS`);
+    ``fps`` is the rate of a CSV (default 30 Hz: it carries none)."""
+    from pipeline.readers.peers import UNITREE_CSV_FPS, read_beyondmimic_npz, read_gmr_pkl, read_unitree_csv
 
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "input", "does not exist or is not a file")
-    suffix = path.suffix.lower()
-    if suffix == ".pkl":
-        return read_gmr_pkl(path)
-    if suffix == ".npz":
+    if fmt is not None and fmt not in ROBOT_FORMATS:
+        raise InputError(path, "format", f"unknown robot motion format {fmt!r}; expected one of {ROBOT_FORMATS}")
+    kind = fmt or _SUFFIX_FORMAT.get(path.suffix.lower())
+    obj = {"object_geometry": object_geometry, "object_scale": object_scale, "object_name": object_name}
+    if kind == "gmr-pkl":
+        return read_gmr_pkl(path, **obj)
+    if kind == "unitree-csv":
+        if fmt is None and csv_kind(path) != "robot":
+            raise InputError(path, "columns", "is not a Unitree G1 CSV (expected 36 numbers a row, no header)")
+        return read_unitree_csv(path, fps=fps or UNITREE_CSV_FPS)
+    if kind == "beyondmimic-npz":
         if npz_kind(path) != "robot":
             raise InputError(path, "joint_pos", "is not a G1 motion npz (expected joint_pos [T, 36] or [T, 29])")
-        return read_beyondmimic_npz(
-            path,
-            object_geometry=object_geometry,
-            object_scale=object_scale,
-            object_name=object_name,
-            joint_names=joint_names,
-        )
-    raise InputError(path, "suffix", f"unknown robot motion format {path.suffix or '(none)'!r}; expected .npz or .pkl")
+        return read_beyondmimic_npz(path, **obj, joint_names=joint_names)
+    raise InputError(
+        path, "suffix", f"unknown robot motion format {path.suffix or '(none)'!r}; expected .npz, .pkl or .csv"
+    )
 
 
 def _robot_candidates(folder: Path) -> list[Path]:
@@ -186,13 +224,16 @@ def _robot_candidates(folder: Path) -> list[Path]:
             out.append(p)
         elif p.is_file() and p.suffix.lower() == ".npz" and p.name != "motion.npz" and npz_kind(p) == "robot":
             out.append(p)
+        elif p.is_file() and p.suffix.lower() == ".csv" and csv_kind(p) == "robot":
+            out.append(p)
     return out
 
 
 def read_robot_clips(path: str | Path, *, object_geometry: ObjectGeometry | None = None) -> list[RobotClip]:
-    """Every G1 motion in ``path``: a BeyondMimic/mjlab ``.npz``, a GMR ``.pkl``, an HDMI motion folder, or a folder
-    of them (searched recursively). An object a file carries must have a geometry (``object_geometry``, else
-    ``<name>.obj`` beside the file): a one-line :class:`InputError` otherwise, as for any unreadable file."""
+    """Every G1 motion in ``path``: a BeyondMimic/mjlab ``.npz``, a GMR ``.pkl``, a Unitree ``.csv`` (30 Hz), an HDMI
+    motion folder, or a folder of them (searched recursively). An object a file carries must have a geometry
+    (``object_geometry``, else ``<name>.obj`` beside the file): a one-line :class:`InputError` otherwise, as for any
+    unreadable file."""
     from pipeline.readers.peers import object_mesh_beside, read_hdmi_motion
 
     path = Path(path)
@@ -222,5 +263,5 @@ def read_robot_clips(path: str | Path, *, object_geometry: ObjectGeometry | None
             clip = read_robot_clip(item, object_geometry=geometry, object_name=left_out)
         clips.append(clip)
     if not clips:
-        raise InputError(path, "input", "no G1 motions (.npz, .pkl, HDMI motion folders) in this folder")
+        raise InputError(path, "input", "no G1 motions (.npz, .pkl, .csv, HDMI motion folders) in this folder")
     return clips

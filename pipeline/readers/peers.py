@@ -34,11 +34,20 @@ GMR ``.pkl`` (a pickle of numpy arrays)
     ``fps``, ``root_pos`` ``[T, 3]``, ``root_rot`` ``[T, 4]`` scalar-last ``xyzw``, ``dof_pos``
     ``[T, 29]`` in the Unitree G1 29-DoF order (= mjlab's; GMR stores no names), optional
     ``local_body_pos`` and ``link_body_list`` (kept in ``provenance``). Loaded with a
-    numpy-only unpickler.
+    numpy-only unpickler. GMR has no object; the toolkit's exporter (:mod:`motion_export.gmr`) adds one as
+    ``object_name``, ``object_pos`` ``[T, 3]`` and ``object_rot`` ``[T, 4]`` ``xyzw`` (GMR's quaternion order),
+    read like the ``.npz``'s object (its geometry from ``object_geometry=``, else left out with a warning).
+
+Unitree G1 retargeting ``.csv`` (Unitree's public LAFAN1 retargeting; what mjlab's ``csv_to_npz.py`` reads)
+    one row per frame, comma-separated, no header: root position (3), root quaternion ``xyzw`` (4), the 29 joint
+    angles in the Unitree G1 order (= mjlab's); 36 numbers. The file carries no frame rate: ``fps`` (default
+    :data:`UNITREE_CSV_FPS`, the rate of Unitree's files and ``csv_to_npz.py``'s ``input_fps`` default). A first
+    row of 36 names is a header and skipped.
 """
 
 from __future__ import annotations
 
+import csv
 import json
 import warnings
 from pathlib import Path
@@ -52,6 +61,8 @@ from pipeline.readers.keypoints import load_npz, load_numpy_pickle
 from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES, actuator_profile, g1_model
 from pipeline.rotations import xyzw_to_wxyz
 
+UNITREE_CSV_FPS = 30.0  # Unitree's G1 retargeting CSVs are sampled at 30 Hz (mjlab csv_to_npz.py's input_fps)
+UNITREE_CSV_COLUMNS = 36  # root xyz, root quaternion xyzw, 29 joints
 HELD_JOINT_KEYS = ("wrist",)  # joints a motion file may lack: they carry no weight, held at the default pose
 HDMI_ROOT_PLACEHOLDER = "root"  # HDMI's joint_names entry (and joint_pos column) for the free joint: dropped
 
@@ -102,6 +113,9 @@ def _root_from_bodies(d, src: str, frames: int) -> np.ndarray:
 def _object_name(d, given: str | None) -> str:
     if given:
         return given
+    for key in ("object_names", "object_name"):  # written by the toolkit's exporter (motion_export)
+        if key in d and np.asarray(d[key]).size:
+            return str(np.asarray(d[key]).reshape(-1)[0])
     for n in (str(x) for x in d.get("body_names", [])):
         if n.endswith("_link") and not any(n.startswith(p) for p in ("left_", "right_", "waist_", "torso", "pelvis")):
             return n[: -len("_link")]
@@ -135,15 +149,7 @@ def read_beyondmimic_npz(
     )
     if "object_pos_w" in d:
         pose = np.concatenate([_array(d, "object_pos_w", 3, src, T), _array(d, "object_quat_w", 4, src, T)], axis=1)
-        name = _object_name(d, object_name)
-        if object_geometry is None:
-            warnings.warn(
-                f"{src}: object {name!r} left out: pass object_geometry= to include it", UserWarning, stacklevel=2
-            )
-            provenance["object_left_out"] = name
-        else:
-            geometry = object_geometry if object_scale == 1.0 else object_geometry.scaled(object_scale)
-            objects = (ObjectTrack(name, geometry, pose, source=src),)
+        objects = _object_track(pose, _object_name(d, object_name), object_geometry, object_scale, src, provenance)
     return RobotClip(
         np.concatenate([root, joints], axis=1),
         fps,
@@ -154,7 +160,28 @@ def read_beyondmimic_npz(
     )
 
 
-def read_gmr_pkl(path: str | Path) -> RobotClip:
+def _object_track(
+    pose: np.ndarray, name: str, geometry: ObjectGeometry | None, scale: float, src: str, provenance: dict
+) -> tuple[ObjectTrack, ...]:
+    """The file's object track with ``geometry`` (scaled by ``scale``); without a geometry none, with a warning and
+    ``provenance["object_left_out"]`` naming it (a folder reader then looks for ``<name>.obj`` beside the file)."""
+    if geometry is None:
+        warnings.warn(
+            f"{src}: object {name!r} left out: pass object_geometry= to include it", UserWarning, stacklevel=3
+        )
+        provenance["object_left_out"] = name
+        return ()
+    geometry = geometry if scale == 1.0 else geometry.scaled(scale)
+    return (ObjectTrack(name, geometry, pose, source=src),)
+
+
+def read_gmr_pkl(
+    path: str | Path,
+    *,
+    object_geometry: ObjectGeometry | None = None,
+    object_scale: float = 1.0,
+    object_name: str | None = None,
+) -> RobotClip:
     """A GMR ``.pkl`` motion as a :class:`RobotClip` (see the module doc)."""
     src = str(path)
     d = load_numpy_pickle(path, "file")
@@ -167,8 +194,54 @@ def read_gmr_pkl(path: str | Path) -> RobotClip:
     provenance = {"format": "gmr_pkl", "file": src, "joint_order": "GMR G1 29-DoF order (= mjlab)"}
     if d.get("link_body_list") is not None:
         provenance["link_body_list"] = [str(n) for n in d["link_body_list"]]
+    objects = ()
+    if d.get("object_pos") is not None:
+        rot = xyzw_to_wxyz(_array(d, "object_rot", 4, src, T))
+        pose = np.concatenate([_array(d, "object_pos", 3, src, T), rot], axis=1)
+        name = object_name or str(d.get("object_name") or "object")
+        objects = _object_track(pose, name, object_geometry, object_scale, src, provenance)
     qpos = np.concatenate([root_pos, xyzw_to_wxyz(root_rot), dof], axis=1)
-    return RobotClip(qpos, fps, src, method="peer:gmr_pkl", provenance=provenance)
+    return RobotClip(qpos, fps, src, objects=objects, method="peer:gmr_pkl", provenance=provenance)
+
+
+def _csv_numbers(row: list[str]) -> list[float] | None:
+    """The row's fields as numbers, or None when one is not a number."""
+    try:
+        return [float(c) for c in row]
+    except ValueError:
+        return None
+
+
+def read_unitree_csv(path: str | Path, *, fps: float = UNITREE_CSV_FPS) -> RobotClip:
+    """A Unitree G1 retargeting ``.csv`` (36 numbers a row: root xyz, root quaternion ``xyzw``, 29 joints; see the
+    module doc) as a :class:`RobotClip` at ``fps``; a row of another width or a field that is not a number is a
+    one-line :class:`InputError` naming its row."""
+    src = str(path)
+    try:
+        with open(path, newline="") as f:
+            rows = [(k, r) for k, r in enumerate(csv.reader(f)) if any(c.strip() for c in r)]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(src, "file", f"not a readable CSV file ({exc})") from None
+    if rows and len(rows[0][1]) == UNITREE_CSV_COLUMNS and _csv_numbers(rows[0][1]) is None:
+        rows = rows[1:]  # a header of 36 names
+    if not rows:
+        raise InputError(src, "rows", "has zero frames")
+    values = np.empty((len(rows), UNITREE_CSV_COLUMNS))
+    for t, (k, row) in enumerate(rows):
+        if len(row) != UNITREE_CSV_COLUMNS:
+            raise InputError(src, f"row {k + 1}", f"has {len(row)} columns, expected {UNITREE_CSV_COLUMNS}", frame=t)
+        numbers = _csv_numbers(row)
+        if numbers is None:
+            raise InputError(src, f"row {k + 1}", "has a field that is not a number", frame=t)
+        values[t] = numbers
+    qpos = np.concatenate([values[:, :3], xyzw_to_wxyz(values[:, 3:7]), values[:, 7:]], axis=1)
+    provenance = {
+        "format": "unitree_csv",
+        "file": src,
+        "joint_order": "Unitree G1 29-DoF order (= mjlab)",
+        "fps": f"{fps:g} Hz given (the file carries no rate)",
+    }
+    return RobotClip(qpos, fps, src, method="peer:unitree_csv", provenance=provenance)
 
 
 def _joints_with_held(names: list[str], jp: np.ndarray, src: str) -> tuple[np.ndarray, list[str]]:

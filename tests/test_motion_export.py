@@ -1,0 +1,296 @@
+"""``lessmimic export-motion`` (motion_export/): an independent forward kinematics on mjlab's own G1, mjlab's
+MotionLoader opening the file on the CPU, round trips through our readers, and every bad input as one line with
+nothing left behind. On the default chain's four synthetic clips, retargeted and physicalized once per module."""
+
+import json
+import re
+import shutil
+from dataclasses import replace
+
+import mujoco
+import numpy as np
+import pytest
+from mocap_paths import expect_input_error
+from scipy.spatial.transform import Rotation, Slerp
+
+from lessmimic.cli import main
+from motion_export import FORMAT_NAMES, stage
+from motion_export.episodes import select_episodes
+from motion_export.sidecar import copy_mesh, profile_entry, start_prefix_entry
+from motion_export.stage import episode_stem, export_motion
+from pipeline.clip import START_PREFIX_KEY
+from pipeline.errors import InputError
+from pipeline.geometry import MeshGeometry
+from pipeline.readers import read_clips, read_robot_clip
+from pipeline.readers.peers import read_beyondmimic_npz, read_gmr_pkl, read_hdmi_motion, read_unitree_csv
+from pipeline.robot import G1_JOINT_NAMES, g1_xml_path
+from pipeline.stage.paths import stage_dir
+
+NAME = "exp"
+QPOS_TOL = 1e-6  # the issue's round-trip bar (float32 storage of unit quaternions: ~1e-7)
+FK_TOL = 1e-5  # m, and per quaternion component (sign-invariant)
+CSV_TOL = 1e-6  # 30 Hz rows against the source interpolated independently (10 significant digits written)
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    """The default chain (4 synthetic clips) retargeted and physicalized in a temporary datasets root, exported in
+    every format: ``(root, source, {format: summary})``."""
+    from lessmimic.chain import retarget
+    from physicalize.stage import run_stage
+
+    root = tmp_path_factory.mktemp("datasets")
+    mp = pytest.MonkeyPatch()
+    mp.setenv("LESSMIMIC_DATASETS", str(root))
+    retarget(None, NAME)
+    run_stage(NAME)
+    summaries = {fmt: export_motion(NAME, fmt) for fmt in FORMAT_NAMES}
+    yield root, select_episodes(NAME), summaries
+    mp.undo()
+
+
+@pytest.fixture(scope="module")
+def mjlab_g1():
+    """mjlab's own G1: the entity (its body and joint names: the file's order) and ``g1.xml`` loaded by plain MuJoCo
+    from the wheel, meshes and all (not our model)."""
+    from mjlab.asset_zoo.robots import get_g1_robot_cfg
+    from mjlab.entity import Entity
+
+    return Entity(get_g1_robot_cfg()), mujoco.MjModel.from_xml_path(str(g1_xml_path()))
+
+
+def _quat_close(a, b, tol):
+    """Quaternions equal up to sign, per component."""
+    d = np.minimum(np.abs(a - b).max(-1), np.abs(a + b).max(-1))
+    return float(d.max()) <= tol, float(d.max())
+
+
+def _fk(model, entity, root_qpos, joint_pos, qvel_root, joint_vel):
+    """Plain MuJoCo forward kinematics of the file's joints (entity order) on ``model``: per entity body its xpos,
+    xquat and (world) linear / angular velocity of its frame origin (mj_objectVelocity)."""
+    d = mujoco.MjData(model)
+    ids = [model.body(b).id for b in entity.body_names]
+    qadr = [model.jnt_qposadr[model.joint(j).id] for j in entity.joint_names]
+    vadr = [model.jnt_dofadr[model.joint(j).id] for j in entity.joint_names]
+    T, B = joint_pos.shape[0], len(ids)
+    pos, quat, vel = np.zeros((T, B, 3)), np.zeros((T, B, 4)), np.zeros((T, B, 6))
+    res = np.zeros(6)
+    for t in range(T):
+        d.qpos[:7], d.qpos[qadr] = root_qpos[t], joint_pos[t]
+        d.qvel[:6], d.qvel[vadr] = qvel_root[t], joint_vel[t]
+        mujoco.mj_kinematics(model, d)
+        mujoco.mj_comPos(model, d)
+        mujoco.mj_comVel(model, d)
+        pos[t], quat[t] = d.xpos[ids], d.xquat[ids]
+        for k, b in enumerate(ids):
+            mujoco.mj_objectVelocity(model, d, mujoco.mjtObj.mjOBJ_XBODY, b, res, 0)
+            vel[t, k] = res
+    return pos, quat, vel
+
+
+def test_npz_matches_an_independent_fk_and_mjlab_loads_it(exported, mjlab_g1):
+    """(a) Every body of every exported .npz against plain MuJoCo FK of mjlab's g1.xml (1e-5 m); mjlab's
+    MotionLoader opens the file on the CPU and its tracked bodies are that FK."""
+    import torch
+    from mjlab.tasks.tracking.config.g1.env_cfgs import unitree_g1_flat_tracking_env_cfg
+    from mjlab.tasks.tracking.mdp.commands import MotionLoader
+
+    _, source, summaries = exported
+    entity, model = mjlab_g1
+    tracked = unitree_g1_flat_tracking_env_cfg().commands["motion"].body_names
+    body_indexes = torch.tensor(entity.find_bodies(tracked, preserve_order=True)[0], dtype=torch.long)
+    out = summaries["mjlab-npz"].out
+    assert summaries["mjlab-npz"].episodes == tuple(e.index for e in source.episodes) and source.episodes
+    for ep in source.episodes:
+        path = out / f"{episode_stem(ep.index, ep.clip.source)}.npz"
+        with np.load(path) as f:
+            d = {k: f[k] for k in f.files}
+        T = ep.frames
+        assert d["fps"].shape == (1,) and d["fps"][0] == 50.0
+        assert d["joint_pos"].shape == d["joint_vel"].shape == (T, 29) and d["joint_pos"].dtype == np.float32
+        assert d["body_pos_w"].shape == (T, len(entity.body_names), 3) and d["body_quat_w"].shape[-1] == 4
+        assert tuple(d["body_names"]) == entity.body_names and tuple(d["joint_names"]) == entity.joint_names
+        qv = ep.qvel  # the simulation's qvel: root linear (world), angular (root frame), joints
+        pos, quat, vel = _fk(model, entity, ep.clip.qpos[:, :7], d["joint_pos"], qv[:, :6], d["joint_vel"])
+        np.testing.assert_allclose(d["body_pos_w"], pos, atol=FK_TOL)
+        ok, err = _quat_close(d["body_quat_w"], quat, FK_TOL)
+        assert ok, f"body_quat_w off by {err}"
+        np.testing.assert_allclose(d["body_ang_vel_w"], vel[..., :3], atol=1e-4)
+        np.testing.assert_allclose(d["body_lin_vel_w"], vel[..., 3:], atol=1e-4)
+        loader = MotionLoader(str(path), body_indexes, device="cpu")
+        assert loader.time_step_total == T and tuple(loader.joint_pos.shape) == (T, 29)
+        np.testing.assert_allclose(loader.body_pos_w.numpy(), pos[:, body_indexes.numpy()], atol=FK_TOL)
+        np.testing.assert_allclose(loader.joint_vel.numpy(), ep.qvel[:, 6:], atol=1e-5)
+
+
+def _object_geometry(ep):
+    return ep.clip.objects[0].geometry
+
+
+def _same_qpos(a, b, tol=QPOS_TOL):
+    np.testing.assert_allclose(a[:, :3], b[:, :3], atol=tol)
+    np.testing.assert_allclose(a[:, 7:], b[:, 7:], atol=tol)
+    ok, err = _quat_close(a[:, 3:7], b[:, 3:7], tol)
+    assert ok, f"root quaternion off by {err}"
+
+
+def test_round_trips_through_our_readers(exported):
+    """(b) npz, HDMI and GMR read back by our readers give the source qpos (1e-6) and object track."""
+    _, source, summaries = exported
+    for ep in source.episodes:
+        stem = episode_stem(ep.index, ep.clip.source)
+        geo = _object_geometry(ep)
+        back = {
+            "mjlab-npz": read_beyondmimic_npz(summaries["mjlab-npz"].out / f"{stem}.npz", object_geometry=geo),
+            "hdmi": read_hdmi_motion(summaries["hdmi"].out / stem, object_geometry=geo),
+            "gmr": read_gmr_pkl(summaries["gmr"].out / f"{stem}.pkl", object_geometry=geo),
+        }
+        for fmt, clip in back.items():
+            assert clip.frames == ep.frames and clip.fps == ep.fps, fmt
+            _same_qpos(clip.qpos, ep.clip.qpos)
+            (obj,) = clip.objects
+            (src,) = ep.clip.objects
+            assert obj.name == src.name and obj.geometry == src.geometry, fmt
+            np.testing.assert_allclose(obj.pose[:, :3], src.pose[:, :3], atol=QPOS_TOL, err_msg=fmt)
+            assert _quat_close(obj.pose[:, 3:], src.pose[:, 3:], QPOS_TOL)[0], fmt
+        with open(summaries["hdmi"].out / stem / "meta.json") as f:
+            assert json.load(f)["body_names"][-1] == ep.clip.objects[0].name  # the object body last
+
+
+def _interpolated(qpos, fps, new_fps):
+    """The source at t_k = k / new_fps by np.interp and scipy's Slerp, independently of the exporter."""
+    t = np.arange(len(qpos)) / fps
+    nt = np.arange(int(np.floor(t[-1] * new_fps + 1e-9)) + 1) / new_fps
+    cols = [np.interp(nt, t, qpos[:, k]) for k in (0, 1, 2)] + [np.interp(nt, t, qpos[:, k]) for k in range(7, 36)]
+    quat = Slerp(t, Rotation.from_quat(qpos[:, [4, 5, 6, 3]]))(nt).as_quat()  # xyzw
+    return np.concatenate([np.stack(cols[:3], 1), quat[:, [3, 0, 1, 2]], np.stack(cols[3:], 1)], 1)
+
+
+def test_unitree_csv_is_the_source_resampled_to_30hz(exported):
+    """(b) The CSV read back (30 Hz, by content) equals the source interpolated at k / 30 s within 1e-6; mjlab's
+    np.loadtxt reads it as [T, 36]; a human reader refuses it in one line."""
+    _, source, summaries = exported
+    out = summaries["unitree-csv"].out
+    for ep in source.episodes:
+        stem = episode_stem(ep.index, ep.clip.source)
+        path = out / f"{stem}.csv"
+        want = _interpolated(ep.clip.qpos, ep.fps, 30.0)
+        assert np.loadtxt(path, delimiter=",").shape == (len(want), 36)
+        back = read_robot_clip(path)  # dispatched by content: 36 numbers a row, no header
+        assert back.fps == 30.0 and back.frames == len(want)
+        _same_qpos(back.qpos, want, CSV_TOL)
+        _same_qpos(read_unitree_csv(path).qpos, back.qpos, 0.0)
+        obj = np.loadtxt(out / f"{stem}.{ep.clip.objects[0].name}.csv", delimiter=",")
+        pose = ep.clip.objects[0].pose
+        t, nt = np.arange(len(pose)) / ep.fps, np.arange(len(want)) / 30.0
+        np.testing.assert_allclose(obj[:, 0], np.interp(nt, t, pose[:, 0]), atol=CSV_TOL)
+        side = json.loads((out / f"{stem}.json").read_text())
+        assert side["motion"]["resampled"]["to_fps"] == 30.0 and side["motion"]["frames"] == len(want)
+    expect_input_error(lambda: read_clips(path), out, file=path, field="columns", match="read_robot_clip")
+
+
+def test_sidecar_and_manifest(exported):
+    _, source, summaries = exported
+    for fmt, s in summaries.items():
+        manifest = json.loads((s.out / "export.json").read_text())
+        assert manifest["format"] == fmt and [r["episode_index"] for r in manifest["episodes"]] == list(s.episodes)
+        assert s.frames > 0 and s.bytes == sum(p.stat().st_size for p in s.out.rglob("*") if p.is_file())
+    ep = source.episodes[0]
+    side = json.loads((summaries["gmr"].out / f"{episode_stem(ep.index, ep.clip.source)}.json").read_text())
+    assert side["source"] == {**side["source"], "dataset": NAME, "stage": "physicalized", "episode_index": ep.index}
+    assert side["validation"]["valid"] is True and side["validation"]["all"] == ep.validation
+    assert side["validation"]["tracking_error"]["mpjpe_m"] == ep.validation["mpjpe_m"]
+    ph = side["physics"]
+    assert (ph["timestep_s"], ph["substeps"], ph["control_hz"]) == (0.005, 4, 50) and ph["robot_mass_kg"] > 30
+    assert ph["objects"][0]["mass_kg"] == ep.clip.objects[0].physics().mass
+    assert side["objects"][0]["geometry"]["type"] in ("primitive", "chair")
+    assert side["motion"]["velocities"] == "simulation" and side["start_prefix"] is None
+
+
+def test_action_scale_is_mjlabs():
+    """The sidecar's action scale under the mjlab profile is mjlab's own G1_ACTION_SCALE, joint by joint."""
+    from mjlab.asset_zoo.robots import G1_ACTION_SCALE
+
+    p = profile_entry("mjlab")
+    for joint, scale in zip(p["joint_names"], p["action_scale"]):
+        (want,) = [v for k, v in G1_ACTION_SCALE.items() if re.fullmatch(k, joint)]
+        assert scale == pytest.approx(want, rel=1e-8), joint
+
+
+def test_start_prefix_and_mesh_copy(exported, tmp_path):
+    _, source, _ = exported
+    ep = source.episodes[0]
+    ep = replace(ep, clip=replace(ep.clip, provenance={**ep.clip.provenance, START_PREFIX_KEY: 25}))
+    assert start_prefix_entry(ep, 50.0, ep.frames)["frames"] == [0, 25]
+    assert start_prefix_entry(ep, 30.0, 100)["frames"] == [0, 15]  # k / 30 < 0.5 s
+    a, b = tmp_path / "a" / "box.obj", tmp_path / "b" / "box.obj"
+    for p, x in ((a, 1), (b, 2)):
+        p.parent.mkdir()
+        p.write_text(f"v {x} 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    assert copy_mesh(MeshGeometry(str(a)), out, "0000_x", "box") == "box.obj"
+    assert copy_mesh(MeshGeometry(str(a)), out, "0001_y", "box") == "box.obj"  # the same mesh: once
+    assert copy_mesh(MeshGeometry(str(b)), out, "0002_z", "box") == "0002_z.box.obj"  # another mesh of that name
+    missing = tmp_path / "gone.obj"
+    expect_input_error(lambda: copy_mesh(MeshGeometry(str(missing)), out, "s", "box"), out, file=missing,
+                       field="object box mesh")  # fmt: skip
+
+
+def test_bad_input_is_one_line_and_leaves_nothing(exported, tmp_path, monkeypatch):
+    """(c) Unknown format, episode out of range, the human / features stage or a folder that is not a G1 motion
+    dataset, an existing output without overwrite, and a failure mid-write: one line, nothing left."""
+    root, _, summaries = exported
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(root))
+    phys = stage_dir(NAME, "physicalized")
+    for call, file, field in (
+        (lambda: export_motion(NAME, "bvh"), phys, "format"),
+        (lambda: export_motion(NAME, "gmr", episode=99), phys, "episode"),
+        (lambda: export_motion(NAME, "gmr", stage="human"), stage_dir(NAME, "human"), "stage"),
+        (lambda: export_motion(NAME, "gmr", stage="features"), stage_dir(NAME, "features"), "stage"),
+        (lambda: export_motion(NAME, "gmr"), summaries["gmr"].out, "out"),
+        (lambda: export_motion("nothing", "gmr"), stage_dir("nothing", "physicalized") / "meta/info.json",
+         "meta/info.json"),
+    ):  # fmt: skip
+        expect_input_error(call, root, file=file, field=field)
+    shutil.copytree(stage_dir(NAME, "human"), stage_dir("humans", "physicalized"))  # a human dataset in disguise
+    info = stage_dir("humans", "physicalized") / "meta/info.json"
+    expect_input_error(lambda: export_motion("humans", "hdmi"), root, file=info, field="features", match="not a G1")
+
+    def broken(ep, bodies, folder, stem):
+        (folder / f"{stem}.partial").write_text("half")
+        raise InputError(folder / stem, "frames", "broken on purpose")
+
+    monkeypatch.setitem(stage.FORMATS, "gmr", broken)
+    with pytest.raises(InputError, match="broken on purpose"):
+        export_motion(NAME, "gmr", tmp_path / "a" / "b" / "out")
+    assert not (tmp_path / "a").exists()
+    with pytest.raises(InputError, match="broken on purpose"):
+        export_motion(NAME, "gmr", overwrite=True)
+    assert sorted(p.name for p in summaries["gmr"].out.parent.iterdir()) == sorted(FORMAT_NAMES)  # old one kept
+
+
+def test_command_line(exported, tmp_path, monkeypatch, capsys):
+    root, source, _ = exported
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(root))
+    out = tmp_path / "one"
+    argv = ["export-motion", "--name", NAME, "--format", "mjlab-npz", "--episode", "1", "--out", str(out)]
+    assert main(argv) == 0
+    assert "exported 1 episode(s)" in capsys.readouterr().out
+    assert [p.name for p in out.glob("*.npz")] == [f"{episode_stem(1, source.episodes[1].clip.source)}.npz"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {out}: out: exists") and err.count("\n") == 1
+    assert main([*argv, "--overwrite", "--stage", "retargeted"]) == 0
+    side = json.loads(next(out.glob("*.json")).read_text())
+    assert side["validation"] is None and side["motion"]["velocities"] == "central differences"
+    assert side["source"]["stage"] == "retargeted"
+
+
+def test_joint_order_is_the_entity_order(mjlab_g1):
+    from motion_export.bodies import ENTITY_BODY_NAMES, ENTITY_JOINT_NAMES
+
+    entity, _ = mjlab_g1
+    assert ENTITY_BODY_NAMES == entity.body_names and ENTITY_JOINT_NAMES == entity.joint_names == G1_JOINT_NAMES
