@@ -231,5 +231,21 @@ bench-vision: install
 bench-vision-mjlab: install
 	$(PY) bench/bench_vision_mjlab.py --name $(CORPUS) $(if $(filter-out file,$(origin POLICY) $(origin RUN)),--policy $(POLICY)) $(BENCH_ARGS)
 
+# The GPU slot's payload (bench/gpu_slot.sh, issue 43 part 6; no venv needed): the wheels the GPU machine's image lacks
+# (bench/gpu_slot_wheels.txt) for its Python 3.12 from PyPI, imageio-ffmpeg's binary-free wheel built from its PyPI
+# sdist, then `gpu_slot.sh pack`: those wheels, datasets/$(CORPUS)/ (xz) and runs/$(RUN)/policy.pt as one tar in
+# pieces of 60 MiB with a sha256 manifest in build/gpu-slot/, and build/gpu-slot/CALLS.txt: the device calls that
+# carry them (CORPUS and RUN default to aug-train and aug here).
+.PHONY: gpu-slot-wheels
+gpu-slot-wheels:
+	env -u PIP_FIND_LINKS PIP_CONFIG_FILE=/dev/null python3 -m pip download --quiet --no-deps --only-binary=:all: \
+		--python-version 3.12 --implementation cp --platform manylinux_2_28_x86_64 --platform manylinux_2_27_x86_64 \
+		--platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 --index-url https://pypi.org/simple \
+		-d build/gpu-slot/wheels -r bench/gpu_slot_wheels.txt
+	env -u PIP_FIND_LINKS PIP_CONFIG_FILE=/dev/null python3 -m pip wheel --quiet --no-deps --no-binary imageio-ffmpeg \
+		--index-url https://pypi.org/simple -w build/gpu-slot/wheels imageio-ffmpeg==0.8.1
+	bash bench/gpu_slot.sh pack --corpus $(if $(filter file,$(origin CORPUS)),aug-train,$(CORPUS)) \
+		--run $(if $(filter file,$(origin RUN)),aug,$(RUN))
+
 clean-venv:
 	rm -rf $(VENV)
