@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from motion_export.bodies import BodyMotion, entity_joints
+from motion_export.bodies import BodyMotion, body_motion, entity_joints
 from motion_export.episodes import ExportEpisode
 from motion_export.writer import Written, fps_value
 from pipeline.dataset.objects import object_column
@@ -52,10 +52,10 @@ def gmr_dict(ep: ExportEpisode, bodies: BodyMotion) -> dict:
     return d
 
 
-def write(ep: ExportEpisode, bodies: BodyMotion, folder: Path, stem: str) -> Written:
+def write(ep: ExportEpisode, folder: Path, stem: str) -> Written:
     """``<stem>.pkl`` (module doc)."""
     path = folder / f"{stem}.pkl"
-    path.write_bytes(pickle.dumps(gmr_dict(ep, bodies), protocol=4))
+    path.write_bytes(pickle.dumps(gmr_dict(ep, body_motion(ep.clip.qpos, ep.qvel)), protocol=4))
     where = tuple(f"{object_column(k)}_pos, {object_column(k)}_rot (xyzw)" for k in range(len(ep.clip.objects)))
     layout = {"keys": "fps; root_pos [T, 3]; root_rot [T, 4] xyzw; dof_pos [T, 29] (Unitree = mjlab order); "
               "local_body_pos [T, 30, 3] (pelvis frame); link_body_list"}  # fmt: skip

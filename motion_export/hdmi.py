@@ -18,16 +18,17 @@ from pathlib import Path
 
 import numpy as np
 
-from motion_export.bodies import ENTITY_JOINT_NAMES, BodyMotion
+from motion_export.bodies import ENTITY_JOINT_NAMES, body_motion
 from motion_export.episodes import ExportEpisode
 from motion_export.npz import robot_arrays
 from motion_export.writer import Written, fps_value, object_motions
 
 
-def write(ep: ExportEpisode, bodies: BodyMotion, folder: Path, stem: str) -> Written:
+def write(ep: ExportEpisode, folder: Path, stem: str) -> Written:
     """``<stem>/motion.npz`` and ``<stem>/meta.json`` (module doc)."""
     out = folder / stem
     out.mkdir()
+    bodies = body_motion(ep.clip.qpos, ep.qvel)
     robot, objects = robot_arrays(ep, bodies), object_motions(ep)
     arrays = {"joint_pos": robot["joint_pos"], "joint_vel": robot["joint_vel"]}
     for key, attr in (("body_pos_w", "pos"), ("body_quat_w", "quat"), ("body_lin_vel_w", "lin_vel"),

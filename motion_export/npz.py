@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from motion_export.bodies import ENTITY_JOINT_NAMES, BodyMotion, entity_joints
+from motion_export.bodies import ENTITY_JOINT_NAMES, BodyMotion, body_motion, entity_joints
 from motion_export.episodes import ExportEpisode
 from motion_export.writer import Written, object_motions
 from pipeline.dataset.objects import object_column
@@ -69,11 +69,11 @@ def object_arrays(ep: ExportEpisode) -> tuple[dict[str, np.ndarray], tuple[str, 
     return arrays, tuple(where)
 
 
-def write(ep: ExportEpisode, bodies: BodyMotion, folder: Path, stem: str) -> Written:
+def write(ep: ExportEpisode, folder: Path, stem: str) -> Written:
     """``<stem>.npz`` in mjlab's layout (module doc)."""
     path = folder / f"{stem}.npz"
     objects, where = object_arrays(ep)
-    np.savez(path, fps=np.array([ep.fps]), **robot_arrays(ep, bodies), **objects)
+    np.savez(path, fps=np.array([ep.fps]), **robot_arrays(ep, body_motion(ep.clip.qpos, ep.qvel)), **objects)
     layout = {
         "keys": "fps [1]; joint_pos, joint_vel [T, 29] (entity joint order); body_pos_w, body_quat_w (wxyz), "
         "body_lin_vel_w, body_ang_vel_w [T, 30, .] (every entity body, world); joint_names, body_names",

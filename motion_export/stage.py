@@ -24,14 +24,13 @@ from pathlib import Path
 from tqdm import tqdm
 
 from motion_export import FORMAT_NAMES, gmr, hdmi, npz, unitree_csv
-from motion_export.bodies import body_motion
 from motion_export.episodes import ExportSource, select_episodes
 from motion_export.sidecar import objects_entry, sidecar
 from pipeline.errors import InputError
 from pipeline.stage.atomic import remove_dead_staging, replace_folder, staging_folder
 from pipeline.stage.paths import file_stem, stage_dir
 
-#: format name -> its writer (``write(episode, bodies, folder, stem) -> Written``)
+#: format name -> its writer (``write(episode, folder, stem) -> Written``)
 FORMATS = dict(zip(FORMAT_NAMES, (npz.write, hdmi.write, gmr.write, unitree_csv.write)))
 MANIFEST = "export.json"
 
@@ -69,7 +68,7 @@ def _write_all(source: ExportSource, fmt: str, folder: Path) -> tuple[list[dict]
     rows, frames, seconds = [], 0, 0.0
     for ep in tqdm(source.episodes, desc=f"export {fmt}", unit="episode"):
         stem = episode_stem(ep.index, ep.clip.source)
-        written = FORMATS[fmt](ep, body_motion(ep.clip.qpos, ep.qvel), folder, stem)
+        written = FORMATS[fmt](ep, folder, stem)
         objects = objects_entry(ep, folder, stem, list(written.objects_in))
         motion = written.motion_entry(folder)
         doc = sidecar(source, ep, fmt, motion, objects)

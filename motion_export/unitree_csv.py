@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from motion_export.bodies import BodyMotion, entity_joints
+from motion_export.bodies import entity_joints
 from motion_export.episodes import ExportEpisode
 from motion_export.writer import Written
 from pipeline.rotations import wxyz_to_xyzw
@@ -33,9 +33,8 @@ def csv_rows(qpos: np.ndarray) -> np.ndarray:
     return np.concatenate([qpos[:, :3], wxyz_to_xyzw(qpos[:, 3:7]), entity_joints(qpos[:, 7:])], axis=1)
 
 
-def write(ep: ExportEpisode, bodies: BodyMotion, folder: Path, stem: str) -> Written:
-    """``<stem>.csv`` at 30 Hz and one ``<stem>.<object>.csv`` per object (module doc); ``bodies`` unused (the file
-    holds no bodies)."""
+def write(ep: ExportEpisode, folder: Path, stem: str) -> Written:
+    """``<stem>.csv`` at 30 Hz and one ``<stem>.<object>.csv`` per object (module doc)."""
     clip = ep.clip.resampled(CSV_FPS)
     path = folder / f"{stem}.csv"
     np.savetxt(path, csv_rows(clip.qpos), delimiter=",", fmt=NUMBER_FORMAT)

@@ -1,7 +1,8 @@
 """What every format writer shares: its result (:class:`Written`) and the objects' world-frame motion.
 
-A writer is ``write(ep, bodies, folder, stem) -> Written``: it writes episode ``ep`` (with its entity bodies
-``bodies``, :func:`motion_export.bodies.body_motion`) into ``folder`` under the name ``stem`` and says what it wrote.
+A writer is ``write(ep, folder, stem) -> Written``: it writes episode ``ep`` into ``folder`` under the name ``stem``
+and says what it wrote; the writers whose format holds bodies run the forward kinematics
+(:func:`motion_export.bodies.body_motion`) themselves, the Unitree CSV (no bodies) does not.
 """
 
 from __future__ import annotations

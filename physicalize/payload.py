@@ -1,6 +1,6 @@
 """The heaviest object the upper body's motors can hold in a reference's poses: the payload cap.
 
-The static torques (:mod:`pipeline.static_torque`) are affine in the hand loads ``f``:
+The static torques (:mod:`physicalize.static_torque`) are affine in the hand loads ``f``:
 
     tau_s(q, k f) = tau_0(q) + k Delta(q),   Delta = tau_s(q, f) - tau_0(q)
 
@@ -34,9 +34,9 @@ from dataclasses import replace
 
 import numpy as np
 
+from physicalize.static_torque import UPPER_BODY_JOINTS, static_torques
 from pipeline.clip import RobotClip
 from pipeline.robot import G1_JOINT_NAMES
-from pipeline.static_torque import UPPER_BODY_JOINTS, static_torques
 
 MARGIN = 0.95  # the share of the effort limit the capped load may ask (the 1.0 x PickUp demonstration asks 0.93)
 

@@ -259,7 +259,7 @@ def test_bad_input_is_one_line_and_leaves_nothing(exported, tmp_path, monkeypatc
     info = stage_dir("humans", "physicalized") / "meta/info.json"
     expect_input_error(lambda: export_motion("humans", "hdmi"), root, file=info, field="features", match="not a G1")
 
-    def broken(ep, bodies, folder, stem):
+    def broken(ep, folder, stem):
         (folder / f"{stem}.partial").write_text("half")
         raise InputError(folder / stem, "frames", "broken on purpose")
 

@@ -2,9 +2,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from physicalize.static_torque import static_torque_figures
+from physicalize.static_torque import UPPER_BODY_JOINTS, static_torque_figures, static_torques
 from pipeline.robot import G1_JOINT_NAMES, HAND_BODIES, actuator_profile, default_qpos, g1_model
-from pipeline.static_torque import UPPER_BODY_JOINTS, static_torques
 
 
 def _pose(seed: int) -> np.ndarray:

@@ -62,22 +62,21 @@ class TeacherActor:
         return EnvConfig(**kw)
 
     def reset(self, env: InteractionEnv) -> None:
-        self.teachers = []
-        for s in env.slots:
-            key = id(s.episode)
-            if key not in self._refs:
-                self._refs[key] = episode_reference(s.episode)
-            self.teachers.append(Teacher(s.episode, s.scene.model, ref=self._refs[key]))
+        self.teachers = [self._teacher(s) for s in env.slots]
+
+    def _teacher(self, slot) -> Teacher:
+        """The teacher of ``slot``'s episode on its model, its reference built once per episode."""
+        key = id(slot.episode)
+        if key not in self._refs:
+            self._refs[key] = episode_reference(slot.episode)
+        return Teacher(slot.episode, slot.scene.model, ref=self._refs[key])
 
     def observe(self, obs: Obs) -> None:
         pass
 
     def rebind(self, env: InteractionEnv, i: int) -> None:
         """Environment ``i`` went on with another episode (a chain's next task): its teacher tracks that one."""
-        s = env.slots[i]
-        if id(s.episode) not in self._refs:
-            self._refs[id(s.episode)] = episode_reference(s.episode)
-        self.teachers[i] = Teacher(s.episode, s.scene.model, ref=self._refs[id(s.episode)])
+        self.teachers[i] = self._teacher(env.slots[i])
 
     def act(self, env: InteractionEnv) -> np.ndarray:
         out = np.zeros((env.num_envs, 29))

@@ -69,18 +69,15 @@ def npz_kind(path: str | Path) -> str | None:
 def csv_kind(path: str | Path) -> str:
     """``"robot"`` when a ``.csv``'s first non-empty row is 36 numbers (Unitree's G1 layout: no header), else
     ``"keypoints"`` (a header row of names); an unreadable file is a one-line :class:`InputError`."""
-    from pipeline.readers.peers import UNITREE_CSV_COLUMNS
+    from pipeline.readers.peers import UNITREE_CSV_COLUMNS, csv_numbers
 
     try:
         with open(path, newline="") as f:
             first = next((r for r in csv.reader(f) if any(c.strip() for c in r)), [])
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise InputError(path, "file", f"not a readable CSV file ({exc})") from None
-    try:
-        numbers = [float(c) for c in first]
-    except ValueError:
-        return "keypoints"
-    return "robot" if len(numbers) == UNITREE_CSV_COLUMNS else "keypoints"
+    robot = len(first) == UNITREE_CSV_COLUMNS and csv_numbers(first) is not None
+    return "robot" if robot else "keypoints"
 
 
 def read_clip(

@@ -204,7 +204,7 @@ def read_gmr_pkl(
     return RobotClip(qpos, fps, src, objects=objects, method="peer:gmr_pkl", provenance=provenance)
 
 
-def _csv_numbers(row: list[str]) -> list[float] | None:
+def csv_numbers(row: list[str]) -> list[float] | None:
     """The row's fields as numbers, or None when one is not a number."""
     try:
         return [float(c) for c in row]
@@ -222,7 +222,7 @@ def read_unitree_csv(path: str | Path, *, fps: float = UNITREE_CSV_FPS) -> Robot
             rows = [(k, r) for k, r in enumerate(csv.reader(f)) if any(c.strip() for c in r)]
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise InputError(src, "file", f"not a readable CSV file ({exc})") from None
-    if rows and len(rows[0][1]) == UNITREE_CSV_COLUMNS and _csv_numbers(rows[0][1]) is None:
+    if rows and len(rows[0][1]) == UNITREE_CSV_COLUMNS and csv_numbers(rows[0][1]) is None:
         rows = rows[1:]  # a header of 36 names
     if not rows:
         raise InputError(src, "rows", "has zero frames")
@@ -230,7 +230,7 @@ def read_unitree_csv(path: str | Path, *, fps: float = UNITREE_CSV_FPS) -> Robot
     for t, (k, row) in enumerate(rows):
         if len(row) != UNITREE_CSV_COLUMNS:
             raise InputError(src, f"row {k + 1}", f"has {len(row)} columns, expected {UNITREE_CSV_COLUMNS}", frame=t)
-        numbers = _csv_numbers(row)
+        numbers = csv_numbers(row)
         if numbers is None:
             raise InputError(src, f"row {k + 1}", "has a field that is not a number", frame=t)
         values[t] = numbers

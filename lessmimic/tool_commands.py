@@ -1,0 +1,98 @@
+"""Commands on one file or one dataset (``inspect``, ``evaluate-retarget``, ``load``, ``publish``, ``merge``), kept
+apart from the per-stage commands of :mod:`lessmimic.cli`."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def _cmd_inspect(a: argparse.Namespace) -> int:
+    from pipeline.readers import read_clips, read_robot_clip
+    from pipeline.stage.inspect_log import write_human_log, write_robot_log
+
+    src = Path(a.file)
+    out = Path(a.out)
+    if a.robot:
+        from pipeline.geometry import MeshGeometry
+
+        geometry = MeshGeometry(a.object_mesh) if a.object_mesh else None
+        print(write_robot_log(read_robot_clip(src, object_geometry=geometry), out))
+        return 0
+    clips = read_clips(src, body_model=a.body_model)
+    for i, c in enumerate(clips):
+        print(write_human_log(c, out if len(clips) == 1 else out.with_name(f"{out.stem}_{i:03d}.mcap")))
+    return 0
+
+
+def _cmd_evaluate_retarget(a: argparse.Namespace) -> int:
+    import json
+
+    from pipeline.stage.atomic import write_json_atomic
+    from retarget.metrics import evaluate_file
+
+    metrics = evaluate_file(a.file, human_path=a.human, object_mesh=a.object_mesh)
+    text = json.dumps({"file": str(a.file), **metrics}, indent=2, default=float)
+    if a.out:
+        write_json_atomic(Path(a.out), json.loads(text))
+    print(text)
+    return 0
+
+
+def _cmd_load(a: argparse.Namespace) -> int:
+    from pipeline.dataset.hub import load
+
+    ds = load(a.dataset)
+    print(f"{ds.repo_id}: {ds.num_episodes} episodes, {ds.num_frames} frames at {ds.fps} fps")
+    for k, v in ds.features.items():
+        print(f"  {k}: {v['dtype']} {tuple(v['shape'])}")
+    return 0
+
+
+def _cmd_publish(a: argparse.Namespace) -> int:
+    from pipeline.dataset.hub import publish
+
+    print(publish(Path(a.dataset), a.repo_id, private=a.private))
+    return 0
+
+
+def _cmd_merge(a: argparse.Namespace) -> int:
+    from pipeline.dataset.merge import merge_datasets
+
+    print(merge_datasets([Path(r) for r in a.shards], Path(a.out), a.repo_id, overwrite=a.overwrite))
+    return 0
+
+
+def add_tools(sub) -> None:
+    p = sub.add_parser("inspect", help="write an MCAP inspection log (Foxglove) for a clip file")
+    p.add_argument("file")
+    p.add_argument("--out", required=True, help="output .mcap path")
+    p.add_argument("--robot", action="store_true", help="the file is a G1 motion (BeyondMimic .npz or GMR .pkl)")
+    p.add_argument(
+        "--object-mesh", default=None, help="with --robot: mesh of the object the motion file carries poses for"
+    )
+    p.add_argument("--body-model", default=None)
+    p.set_defaults(func=_cmd_inspect)
+    p = sub.add_parser(
+        "evaluate-retarget",
+        help="retarget quality metrics of a G1 motion file (ours or a peer's) with our collision model",
+    )
+    p.add_argument("file", help="BeyondMimic/OmniRetarget .npz or GMR .pkl")
+    p.add_argument("--human", default=None, help="the human clip it came from (foot contacts, contact flags)")
+    p.add_argument("--object-mesh", default=None, help="mesh of the object the file carries poses for")
+    p.add_argument("--out", default=None, help="also write the metrics to this JSON file")
+    p.set_defaults(func=_cmd_evaluate_retarget)
+    p = sub.add_parser("load", help="load a dataset by path or hub repo id with LeRobot's loader and summarise it")
+    p.add_argument("dataset")
+    p.set_defaults(func=_cmd_load)
+    p = sub.add_parser("publish", help="push a dataset folder to the Hugging Face hub")
+    p.add_argument("dataset")
+    p.add_argument("--repo-id", required=True)
+    p.add_argument("--private", action="store_true")
+    p.set_defaults(func=_cmd_publish)
+    p = sub.add_parser("merge", help="merge dataset shards into one dataset")
+    p.add_argument("shards", nargs="+")
+    p.add_argument("--out", required=True)
+    p.add_argument("--repo-id", required=True)
+    p.add_argument("--overwrite", action="store_true")
+    p.set_defaults(func=_cmd_merge)
