@@ -7,6 +7,8 @@ Bad input stops with one line ``error: <file>: frame <k>: <field>: <problem>`` a
 status 2, leaving no partial output. A rerun on the same input with the same options finds
 its output up to date and does nothing; an interrupted run (killed at any point) resumes where it
 stopped (:mod:`pipeline.stage.run`); other input or options over an existing output need ``--overwrite``.
+A command that writes into ``datasets/<NAME>/`` holds its lock (:mod:`pipeline.stage.lock`): a second writer
+stops in one line naming the first.
 """
 
 from __future__ import annotations
@@ -19,8 +21,9 @@ from lessmimic.corpus_commands import add_corpus
 from lessmimic.export_commands import add_export_motion
 from lessmimic.tool_commands import add_tools
 from lessmimic.train_commands import add_train
-from pipeline.errors import InputError
+from pipeline.errors import INTERRUPTED, InputError, os_error_line
 from pipeline.stage.executor import EXECUTORS
+from pipeline.stage.lock import writer_lock
 from pipeline.stage.state import up_to_date_line
 
 
@@ -222,7 +225,7 @@ def _add_retarget(sub) -> None:
         help="with --augment-scales: the shapes, box (the object's own) and/or cylinder (a box as a circular "
         "cylinder), comma list (default box)",
     )
-    p.set_defaults(func=_cmd_retarget)
+    p.set_defaults(func=_cmd_retarget, writes="name")
 
 
 def _add_import(sub) -> None:
@@ -239,7 +242,7 @@ def _add_import(sub) -> None:
     )
     p.add_argument("--object-mass", type=float, default=None, help="the object's mass in kg (default 2)")
     _run_args(p)
-    p.set_defaults(func=_cmd_import)
+    p.set_defaults(func=_cmd_import, writes="name")
 
 
 def _add_physicalize(sub) -> None:
@@ -262,7 +265,7 @@ def _add_physicalize(sub) -> None:
         action="store_true",
         help="also write clips that fail validation (they are always in report.json)",
     )
-    p.set_defaults(func=_cmd_physicalize)
+    p.set_defaults(func=_cmd_physicalize, writes="name")
 
 
 def _add_features(sub) -> None:
@@ -282,7 +285,7 @@ def _add_features(sub) -> None:
         help="comma-separated G1 body names for observation.df (default: pelvis, torso, hips, knees, "
         "ankles, shoulders, elbows, wrists)",
     )
-    p.set_defaults(func=_cmd_features)
+    p.set_defaults(func=_cmd_features, writes="name")
 
 
 def _add_residual(sub) -> None:
@@ -314,11 +317,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command; a bad input, a refused lock, an OS error or Ctrl-C is one ``error:`` line on stderr."""
     args = build_parser().parse_args(argv)
     try:
-        return args.func(args)
+        with writer_lock(getattr(args, args.writes) if getattr(args, "writes", None) else None):
+            return args.func(args)
     except (InputError, FileExistsError) as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"error: interrupted (Ctrl-C): {INTERRUPTED}", file=sys.stderr)
+        return 130
+    except OSError as exc:
+        print(f"error: {os_error_line(exc)}", file=sys.stderr)
         return 2
 
 

@@ -28,4 +28,4 @@ def add_corpus(sub) -> None:
         "--variants", required=True, help="comma list of the variant labels kept, e.g. x0.6,x0.8,x1,x1.2,x1.4"
     )
     p.add_argument("--overwrite", action="store_true", help="replace an existing datasets/<OUT>/")
-    p.set_defaults(func=_cmd_subset)
+    p.set_defaults(func=_cmd_subset, writes="out")

@@ -29,3 +29,17 @@ def first_bad_frame(mask) -> int:
     if m.ndim > 1:
         m = m.reshape(m.shape[0], -1).any(axis=1)
     return int(np.flatnonzero(m)[0])
+
+
+#: What the command line says after Ctrl-C: every write is atomic and every stage resumable (pipeline.stage.run).
+INTERRUPTED = "nothing half-written was kept; the same command resumes where it stopped"
+
+
+def os_error_line(exc: OSError) -> str:
+    """An :class:`OSError` as one line naming the path and the reason (``<path>: <reason>``), instead of a
+    traceback: an unreadable folder, a read-only output, a network failure, a full disk."""
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    where = f"{exc.filename}: " if exc.filename is not None else ""
+    if exc.filename2 is not None:
+        where = f"{exc.filename} -> {exc.filename2}: "
+    return (where + reason).replace("\n", " ")

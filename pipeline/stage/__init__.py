@@ -6,5 +6,6 @@
 * :mod:`~pipeline.stage.state` -- fingerprints: what a stage's output depends on;
 * :mod:`~pipeline.stage.paths` -- where a stage reads and writes (``datasets/<NAME>/<stage>/``, logs, work);
 * :mod:`~pipeline.stage.atomic` -- files written whole or not at all;
+* :mod:`~pipeline.stage.lock` -- one writer per dataset (``datasets/<NAME>/.lock``);
 * :mod:`~pipeline.stage.inspect_log`, :mod:`~pipeline.stage.figure` -- MCAP inspection logs and PNG figures.
 """
