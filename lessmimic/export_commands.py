@@ -31,8 +31,8 @@ def _cmd_export_motion(a: argparse.Namespace) -> int:
 def add_export_motion(sub) -> None:
     p = sub.add_parser(
         "export-motion",
-        help="a physicalized (or retargeted) dataset's G1 motions as mjlab/BeyondMimic .npz, HDMI folders, GMR .pkl "
-        "or Unitree .csv, each with a JSON sidecar (datasets/<NAME>/export/<FORMAT>/)",
+        help="a physicalized (or retargeted) dataset's G1 motions as mjlab .npz, BeyondMimic .npz (Isaac Lab order), "
+        "HDMI folders, GMR .pkl or Unitree .csv, each with a JSON sidecar (datasets/<NAME>/export/<FORMAT>/)",
     )
     p.add_argument("--name", default="default", help="dataset name: reads datasets/<NAME>/<STAGE>/ (default: default)")
     p.add_argument("--format", required=True, help=f"one of {', '.join(FORMAT_NAMES)}")

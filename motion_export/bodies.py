@@ -12,6 +12,10 @@ after the world (``Entity.body_names`` = ``spec.bodies[1:]``), which for ``g1.xm
   world: ``v_o = v_c + w x (p_o - c)`` with ``(w, v_c)`` = ``cvel`` (MuJoCo's com-based spatial velocity, taken at
   the subtree centre of mass ``c`` of the body's tree root) and ``p_o`` = ``xpos``.
 
+Isaac Lab (BeyondMimic, HDMI) means something else by a body's linear velocity: ``body_lin_vel_w`` is the velocity of
+the body's **centre of mass** (PhysX reports rigid bodies at their COM), ``v_com = v_c + w x (x_com - c)`` with
+``x_com`` = ``xipos``: :attr:`BodyMotion.com_lin_vel`. Positions and orientations are the link frame's in both.
+
 :func:`body_motion` sets ``qpos`` / ``qvel`` (root linear velocity world, root angular velocity in the root frame:
 MuJoCo's free joint) on the robot model of :func:`pipeline.robot.g1_model` (mjlab's ``g1.xml`` without its visual
 meshes: the same bodies, joints and inertias) and runs ``mj_kinematics``, ``mj_comPos`` and ``mj_comVel``.
@@ -42,13 +46,15 @@ ENTITY_JOINT_INDEX = np.array([G1_JOINT_NAMES.index(n) for n in ENTITY_JOINT_NAM
 @dataclass(frozen=True)
 class BodyMotion:
     """Per frame and body (``[T, B, .]``, bodies :attr:`names`): world position [m], orientation (``wxyz``),
-    linear velocity of the body frame's origin [m/s] and angular velocity [rad/s], all in the world frame."""
+    linear velocity of the body frame's origin [m/s], angular velocity [rad/s] and linear velocity of the body's
+    centre of mass [m/s] (Isaac Lab's ``body_lin_vel_w``), all in the world frame."""
 
     names: tuple[str, ...]
     pos: np.ndarray
     quat: np.ndarray
     lin_vel: np.ndarray
     ang_vel: np.ndarray
+    com_lin_vel: np.ndarray
 
     @property
     def frames(self) -> int:
@@ -69,13 +75,21 @@ def body_motion(qpos: np.ndarray, qvel: np.ndarray) -> BodyMotion:
     d = mujoco.MjData(m)
     T, B = qpos.shape[0], m.nbody - 1
     pos, quat, cvel, com = np.empty((T, B, 3)), np.empty((T, B, 4)), np.empty((T, B, 6)), np.empty((T, B, 3))
+    ipos = np.empty((T, B, 3))
     root = m.body_rootid[1:]
     for t in range(T):
         d.qpos[:], d.qvel[:] = qpos[t], qvel[t]
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
         mujoco.mj_comVel(m, d)
-        pos[t], quat[t], cvel[t], com[t] = d.xpos[1:], d.xquat[1:], d.cvel[1:], d.subtree_com[root]
+        pos[t], quat[t], cvel[t], com[t], ipos[t] = (
+            d.xpos[1:],
+            d.xquat[1:],
+            d.cvel[1:],
+            d.subtree_com[root],
+            d.xipos[1:],
+        )
     ang = cvel[..., 0:3]
     lin = cvel[..., 3:6] + np.cross(ang, pos - com)
-    return BodyMotion(ENTITY_BODY_NAMES, pos, quat, lin, ang)
+    com_lin = cvel[..., 3:6] + np.cross(ang, ipos - com)
+    return BodyMotion(ENTITY_BODY_NAMES, pos, quat, lin, ang, com_lin)

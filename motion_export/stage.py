@@ -31,7 +31,7 @@ from pipeline.stage.atomic import remove_dead_staging, replace_folder, staging_f
 from pipeline.stage.paths import file_stem, stage_dir
 
 #: format name -> its writer (``write(episode, folder, stem) -> Written``)
-FORMATS = dict(zip(FORMAT_NAMES, (npz.write, hdmi.write, gmr.write, unitree_csv.write)))
+FORMATS = dict(zip(FORMAT_NAMES, (npz.write, npz.write_beyondmimic, hdmi.write, gmr.write, unitree_csv.write)))
 MANIFEST = "export.json"
 
 

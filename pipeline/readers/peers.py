@@ -6,7 +6,10 @@ BeyondMimic / mjlab motion ``.npz`` (OmniRetarget writes it too)
     ``pelvis`` body, else body 0); ``joint_names`` ``[29]``; optional ``object_pos_w`` ``[T, 3]``
     and ``object_quat_w`` ``[T, 4]``. Joints are reordered by name into
     :data:`~pipeline.robot.G1_JOINT_NAMES` (mjlab's order, which the OmniRetarget file already
-    uses); a file without ``joint_names`` needs ``joint_names=``. ``object_quat_w`` is
+    uses). A file without ``joint_names`` (what BeyondMimic's and mjlab's ``csv_to_npz.py``
+    write: ``joint_pos [T, 29]`` and 30 bodies) is in Isaac Lab's breadth-first order
+    (BeyondMimic) or MuJoCo's depth-first one (mjlab), told apart by the bodies' forward
+    kinematics (:mod:`pipeline.readers.npz_order`); neither matching needs ``joint_names=``. ``object_quat_w`` is
     ``wxyz``: in ``sub3_largebox_003_mj_w_obj.npz`` it equals the ``largebox_link`` entry of
     ``body_quat_w`` (MuJoCo order, 1e-7) and the human clip's ``xyzw`` object quaternion with its
     scalar moved first.
@@ -58,6 +61,7 @@ from pipeline.clip import ObjectTrack, RobotClip, check_array
 from pipeline.errors import InputError
 from pipeline.geometry import MeshGeometry, ObjectGeometry
 from pipeline.readers.keypoints import load_npz, load_numpy_pickle
+from pipeline.readers.npz_order import nameless_order
 from pipeline.robot import G1_JOINT_NAMES, G1_LINK_NAMES, actuator_profile, g1_model
 from pipeline.rotations import xyzw_to_wxyz
 
@@ -139,14 +143,13 @@ def read_beyondmimic_npz(
     if jp.shape[1] not in (29, 36):
         raise InputError(src, "joint_pos", f"shape {jp.shape} is not (T, 36) or (T, 29)")
     names = joint_names if joint_names is not None else d.get("joint_names")
+    order = "reordered by name to mjlab G1 order"
     if names is None:
-        raise InputError(src, "joint_names", "missing: the joint order is unknown; pass joint_names=")
+        found, names = nameless_order(d, src)
+        order = f"no joint names: {found} order, told by the bodies' forward kinematics; reordered to mjlab's"
     joints = jp[:, -29:][:, reorder_joints(names, src)]
     root = jp[:, :7] if jp.shape[1] == 36 else _root_from_bodies(d, src, T)
-    objects, provenance = (
-        (),
-        {"format": "beyondmimic_npz", "file": src, "joint_order": "reordered by name to mjlab G1 order"},
-    )
+    objects, provenance = (), {"format": "beyondmimic_npz", "file": src, "joint_order": order}
     if "object_pos_w" in d:
         pose = np.concatenate([_array(d, "object_pos_w", 3, src, T), _array(d, "object_quat_w", 4, src, T)], axis=1)
         objects = _object_track(pose, _object_name(d, object_name), object_geometry, object_scale, src, provenance)
