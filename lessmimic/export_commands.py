@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from motion_export import FORMAT_NAMES, MOTION_STAGES
+from motion_export import FORMAT_NAMES, HDMI_OBJECT_NAMES, MOTION_STAGES
 
 
 def _cmd_export_motion(a: argparse.Namespace) -> int:
@@ -19,6 +19,7 @@ def _cmd_export_motion(a: argparse.Namespace) -> int:
         episode=a.episode,
         include_invalid=a.all,
         overwrite=a.overwrite,
+        hdmi_object=a.hdmi_object,
     )
     print(
         f"exported {len(s.episodes)} episode(s) of datasets/{a.name}/{a.stage}/ as {s.fmt} -> {s.out}/: "
@@ -46,4 +47,11 @@ def add_export_motion(sub) -> None:
         "--out", default=None, help="output folder (default datasets/<NAME>/export/<FORMAT>/; <FORMAT>-retargeted/)"
     )
     p.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    p.add_argument(
+        "--hdmi-object",
+        default=None,
+        choices=HDMI_OBJECT_NAMES,
+        help="hdmi: name the (first) object as HDMI's asset, which HDMI finds its object body by (its task's "
+        "object_asset_name; default: the dataset's object name)",
+    )
     p.set_defaults(func=_cmd_export_motion)

@@ -23,3 +23,6 @@ FORMAT_NAMES = (
     "unitree-csv",
 )  #: the formats, in :data:`motion_export.stage.FORMATS`
 MOTION_STAGES = ("physicalized", "retargeted")  #: the stages a G1 motion is exported from (the first the default)
+#: HDMI's rigid tracked objects (``object_asset_name`` of its ``cfg/task/G1/hdmi/*.yaml``): ``--hdmi-object`` choices;
+#: its articulated ones (``door``, ``foldchair``) also need an object joint in ``joint_names``, which ours have not
+HDMI_OBJECT_NAMES = ("suitcase", "box", "bread_box", "foam", "stool", "ball", "wood_board", "stair")

@@ -6,11 +6,13 @@ holds per episode ``<stem>`` = ``<episode index, 4 digits>_<clip source>``: the 
 for HDMI, ``<stem>.pkl``, ``<stem>.csv``), ``<stem>.json`` (its sidecar), object meshes beside them, and
 ``export.json`` (what was exported: the format, source, and per episode its files and frames). It is written into
 a temporary folder beside it and renamed into place when complete (an old export is replaced only with
-``overwrite``); a failure removes everything the call created.
+``overwrite``); a failure removes everything the call created. ``hdmi_object`` renames each episode's first object
+to an HDMI asset name before anything is written (its mesh is copied under that name; the sidecar keeps the
+dataset's name as ``dataset_name``).
 
 Bad input is a one-line :class:`~pipeline.errors.InputError` naming the file and field, before anything is written:
-an unknown format, anything :func:`motion_export.episodes.select_episodes` refuses, an existing output without
-``overwrite``.
+an unknown format, an HDMI object name with another format or outside HDMI's, anything
+:func:`motion_export.episodes.select_episodes` refuses, an existing output without ``overwrite``.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from motion_export import FORMAT_NAMES, gmr, hdmi, npz, unitree_csv
+from motion_export import FORMAT_NAMES, HDMI_OBJECT_NAMES, gmr, hdmi, npz, unitree_csv
 from motion_export.episodes import ExportSource, select_episodes
 from motion_export.sidecar import objects_entry, sidecar
 from pipeline.errors import InputError
@@ -63,13 +65,18 @@ def episode_stem(index: int, source: str) -> str:
     return f"{index:04d}_{file_stem(source)}"
 
 
-def _write_all(source: ExportSource, fmt: str, folder: Path) -> tuple[list[dict], int, float]:
+def _write_all(source: ExportSource, fmt: str, folder: Path, hdmi_object: str | None) -> tuple[list[dict], int, float]:
     """Every episode and its sidecar into ``folder``; the manifest rows, exported frames and seconds of motion."""
     rows, frames, seconds = [], 0, 0.0
     for ep in tqdm(source.episodes, desc=f"export {fmt}", unit="episode"):
         stem = episode_stem(ep.index, ep.clip.source)
+        dataset_names = [o.name for o in ep.clip.objects]
+        if hdmi_object is not None:
+            ep = hdmi.with_object_name(ep, hdmi_object)
         written = FORMATS[fmt](ep, folder, stem)
         objects = objects_entry(ep, folder, stem, list(written.objects_in))
+        for entry, name in zip(objects, dataset_names):
+            entry["dataset_name"] = name
         motion = written.motion_entry(folder)
         doc = sidecar(source, ep, fmt, motion, objects)
         (folder / f"{stem}.json").write_text(json.dumps(doc, indent=2, default=str) + "\n")
@@ -88,10 +95,15 @@ def export_motion(
     episode: int | None = None,
     include_invalid: bool = False,
     overwrite: bool = False,
+    hdmi_object: str | None = None,
 ) -> ExportSummary:
-    """Export corpus ``name``'s ``stage`` as ``fmt`` into ``out`` (module doc); returns what was written."""
+    """Export corpus ``name``'s ``stage`` as ``fmt`` into ``out`` (module doc); returns what was written.
+    ``hdmi_object`` names the first object as HDMI's asset (one of :data:`motion_export.HDMI_OBJECT_NAMES`)."""
     if fmt not in FORMATS:
         raise InputError(stage_dir(name, stage), "format", f"unknown format {fmt!r}; known: {', '.join(FORMATS)}")
+    if hdmi_object is not None and (fmt != "hdmi" or hdmi_object not in HDMI_OBJECT_NAMES):
+        why = f"{hdmi_object!r} with format {fmt}: HDMI only, one of {', '.join(HDMI_OBJECT_NAMES)}"
+        raise InputError(stage_dir(name, stage), "hdmi_object", why)
     t0 = time.perf_counter()
     source = select_episodes(name, stage, episode=episode, include_invalid=include_invalid)
     out = Path(out) if out is not None else default_out(name, fmt, stage)
@@ -106,7 +118,7 @@ def export_motion(
     t1 = time.perf_counter()
     try:
         tmp.mkdir()
-        rows, frames, seconds = _write_all(source, fmt, tmp)
+        rows, frames, seconds = _write_all(source, fmt, tmp, hdmi_object)
         manifest = {"format": fmt, "dataset": name, "stage": stage, "root": str(source.root),
                     "episodes_in_dataset": source.total, "episodes": rows}  # fmt: skip
         (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2, default=str) + "\n")

@@ -6,6 +6,7 @@ import json
 import re
 import shutil
 from dataclasses import replace
+from functools import partial
 
 import mujoco
 import numpy as np
@@ -247,6 +248,53 @@ def test_round_trips_through_our_readers(exported):
             assert _quat_close(obj.pose[:, 3:], src.pose[:, 3:], QPOS_TOL)[0], fmt
         with open(summaries["hdmi"].out / stem / "meta.json") as f:
             assert json.load(f)["body_names"][-1] == ep.clip.objects[0].name  # the object body last
+
+
+HDMI_KEYPOINTS = (  # HDMI cfg/task/base/hdmi-base.yaml: tracking_keypoint_names (regexes over its body names)
+    r".*_hip_(pitch|yaw)_link", r".*_knee_link", r".*_ankle_roll_link", "pelvis", "torso_link",
+    r".*_shoulder_pitch_link", r".*_elbow_link", r".*_wrist_yaw_link",
+)  # fmt: skip
+HDMI_MOTION_KEYS = ("body_pos_w", "body_lin_vel_w", "body_quat_w", "body_ang_vel_w", "joint_pos", "joint_vel")
+
+
+def test_hdmi_folder_has_what_hdmis_object_command_reads(exported, tmp_path, monkeypatch):
+    """Read as HDMI's MotionDataset and RobotObjectTracking read a folder: meta.json's fps, names; every MotionData
+    key; the object body found by HDMI's asset name (--hdmi-object); object_contact [T, 1] bool from the episode's
+    contact labels; the robot's body_lin_vel_w its centre-of-mass velocity (Isaac Lab's, as HDMI records it)."""
+    root, source, summaries = exported
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(root))
+    out = export_motion(NAME, "hdmi", tmp_path / "hdmi", hdmi_object="suitcase").out
+    for ep in source.episodes:
+        stem = episode_stem(ep.index, ep.clip.source)
+        meta = json.loads((out / stem / "meta.json").read_text())
+        d = dict(np.load(out / stem / "motion.npz", allow_pickle=True))  # HDMI: dict(np.load(..., allow_pickle=True))
+        T, B = ep.frames, len(meta["body_names"])
+        assert meta["fps"] == 50 and sorted(meta["joint_names"]) == sorted(G1_JOINT_NAMES)  # HDMI: 50 Hz, no resample
+        assert set(d) == {*HDMI_MOTION_KEYS, "object_contact"}
+        for key in HDMI_MOTION_KEYS:
+            assert d[key].shape == ((T, 29) if key.startswith("joint") else (T, B, 4 if "quat" in key else 3)), key
+        assert meta["body_names"].index("suitcase") == B - 1 == 30  # object_body_id_motion = body_names.index(...)
+        for pattern in HDMI_KEYPOINTS:
+            assert any(re.fullmatch(pattern, n) for n in meta["body_names"]), pattern
+        assert meta["body_names"].index("pelvis") == 0  # root_body_name
+        contact = d["object_contact"]
+        assert contact.shape == (T, 1) and contact.dtype == np.bool_
+        want = ep.clip.objects[0].contact if ep.clip.objects[0].contact is not None else ep.clip.contacts.any(1)
+        np.testing.assert_array_equal(contact[:, 0], want)
+        assert 0 < contact.mean() < 1  # the synthetic tasks touch the object for part of the clip
+        bm = _npz(summaries["beyondmimic-npz"].out / f"{stem}.npz")
+        order = [list(bm["body_names"]).index(n) for n in meta["body_names"][:30]]
+        np.testing.assert_array_equal(d["body_lin_vel_w"][:, :30], bm["body_lin_vel_w"][:, order])
+        side = json.loads((out / f"{stem}.json").read_text())
+        assert side["objects"][0]["name"] == "suitcase" == side["motion"]["object_asset_name"]
+        assert side["objects"][0]["dataset_name"] == ep.clip.objects[0].name
+        back = read_hdmi_motion(out / stem, object_geometry=_object_geometry(ep))
+        assert back.objects[0].name == "suitcase"
+        np.testing.assert_array_equal(back.objects[0].contact, contact[:, 0])
+    phys = stage_dir(NAME, "physicalized")
+    for fmt, name in (("gmr", "suitcase"), ("hdmi", "crate")):
+        call = partial(export_motion, NAME, fmt, tmp_path / "x", hdmi_object=name)
+        expect_input_error(call, tmp_path, file=phys, field="hdmi_object")
 
 
 def _interpolated(qpos, fps, new_fps):

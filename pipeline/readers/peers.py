@@ -32,6 +32,8 @@ HDMI motion folder (``motion.npz`` + ``meta.json``)
     default pose and named in ``provenance["held_joints"]``; a file without a leg, waist or arm joint is an
     :class:`InputError`. A body that is not a G1 link is the object: its geometry is
     ``object_geometry=``, else ``<name>.obj`` in the folder or its parent; none is an :class:`InputError`.
+    ``object_contact`` ``[T, 1]`` (HDMI's tracked object in contact; bool, or 0/1 floats in some of its samples)
+    becomes the first object's contact flags.
 
 GMR ``.pkl`` (a pickle of numpy arrays)
     ``fps``, ``root_pos`` ``[T, 3]``, ``root_rot`` ``[T, 4]`` scalar-last ``xyzw``, ``dof_pos``
@@ -304,12 +306,14 @@ def read_hdmi_motion(folder: str | Path, *, object_geometry: ObjectGeometry | No
     root = np.concatenate([pos[:, b], quat[:, b]], axis=1)
     links = {g1_model().body(i).name for i in range(1, g1_model().nbody)} | set(G1_LINK_NAMES)
     objects = []
+    contact = np.asarray(d["object_contact"]).reshape(T, -1).any(axis=1) if "object_contact" in d else None
     for k in (k for k, n in enumerate(bodies) if n not in links):
         name = bodies[k]
         geometry = object_geometry or object_mesh_beside(folder / "motion.npz", name)
         if geometry is None:
             raise InputError(src, f"object {name}", "has no geometry: pass --object-mesh or put <name>.obj beside it")
-        objects.append(ObjectTrack(name, geometry, np.concatenate([pos[:, k], quat[:, k]], axis=1), source=src))
+        pose = np.concatenate([pos[:, k], quat[:, k]], axis=1)
+        objects.append(ObjectTrack(name, geometry, pose, contact=None if objects else contact, source=src))
     provenance = {"format": "hdmi_motion", "file": src, "joint_order": "reordered by name to mjlab G1 order"}
     if held:
         provenance["held_joints"] = held
