@@ -297,6 +297,66 @@ def test_hdmi_folder_has_what_hdmis_object_command_reads(exported, tmp_path, mon
         expect_input_error(call, tmp_path, file=phys, field="hdmi_object")
 
 
+GMR_ADDED = (
+    "left_toe_link",
+    "right_toe_link",
+    "pelvis_contour_link",
+    "head_link",
+    "head_mocap",
+    "imu_in_torso",
+    "left_rubber_hand",
+    "right_rubber_hand",
+)  # issue 56: GMR's g1_mocap_29dof.xml bodies mjlab's G1 lacks
+
+
+def _is_depth_first(order, parent):
+    """``order`` lists a tree depth-first (pre-order): each body follows its parent's subtree prefix."""
+    stack = []
+    for name in order:
+        while stack and stack[-1] != parent[name]:
+            stack.pop()
+        if parent[name] is not None and not stack:
+            return False
+        stack.append(name)
+    return True
+
+
+def test_gmr_pkl_lists_the_38_bodies_of_gmrs_g1(exported, mjlab_g1):
+    """link_body_list is GMR's xml's 38 bodies in its depth-first order; local_body_pos is each one in the pelvis
+    frame by forward kinematics of a MuJoCo G1 with the 8 fixed frames added as bodies (1e-9 m); TWIST-style
+    lookups by name find them."""
+    import pickle
+
+    from motion_export.gmr import GMR_BODY_NAMES, GMR_FIXED_FRAMES
+    from pipeline.robot import g1_spec
+
+    _, source, summaries = exported
+    entity, _ = mjlab_g1
+    assert len(GMR_BODY_NAMES) == 38 and set(GMR_BODY_NAMES) == {*entity.body_names, *GMR_ADDED}
+    spec = g1_spec()
+    for name, (parent, offset) in GMR_FIXED_FRAMES.items():
+        spec.body(parent).add_body(name=name, pos=offset)
+    model = spec.compile()
+    parent = {model.body(b).name: model.body(int(model.body_parentid[b])).name for b in range(2, model.nbody)}
+    assert _is_depth_first(GMR_BODY_NAMES, {"pelvis": None, **parent})
+    assert not _is_depth_first(entity.body_names[:7] + ("right_toe_link",), {"pelvis": None, **parent})
+    d = mujoco.MjData(model)
+    ids = [model.body(n).id for n in GMR_BODY_NAMES]
+    for ep in source.episodes:
+        stem = episode_stem(ep.index, ep.clip.source)
+        g = pickle.loads((summaries["gmr"].out / f"{stem}.pkl").read_bytes())
+        assert g["link_body_list"] == list(GMR_BODY_NAMES) and g["local_body_pos"].shape == (ep.frames, 38, 3)
+        for t in range(0, ep.frames, 7):
+            d.qpos[:] = ep.clip.qpos[t]
+            mujoco.mj_kinematics(model, d)
+            want = (d.xpos[ids] - d.xpos[1]) @ d.xmat[1].reshape(3, 3)  # R_root^T (p - p_root), row-wise
+            np.testing.assert_allclose(g["local_body_pos"][t], want, atol=1e-9)
+        hand = g["link_body_list"].index("left_rubber_hand")  # a TWIST-style lookup
+        wrist = g["link_body_list"].index("left_wrist_yaw_link")
+        gap = np.linalg.norm(g["local_body_pos"][:, hand] - g["local_body_pos"][:, wrist], axis=-1)
+        np.testing.assert_allclose(gap, np.hypot(0.0415, 0.003), atol=1e-9)
+
+
 def _interpolated(qpos, fps, new_fps):
     """The source at t_k = k / new_fps by np.interp and scipy's Slerp, independently of the exporter."""
     t = np.arange(len(qpos)) / fps
