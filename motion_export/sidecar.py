@@ -3,7 +3,8 @@ conditions the motion was made and validated under, and to judge it.
 
 * ``source`` -- dataset, stage, episode index, the clip's source, task, method and provenance;
 * ``motion`` -- the exported file's frame rate, frames, seconds, quaternion and joint order, where the velocities
-  come from, and (Unitree CSV) the resampling;
+  come from (a Unitree CSV holds none), and (Unitree CSV) the resampling and what mjlab's ``csv_to_npz.py`` makes of
+  it;
 * ``start_prefix`` -- the synthetic start prefix (:mod:`physicalize.start`: a standing settle and a blend into the
   clip's first frame, simulated and validated with the rest), when the episode has one: its length in the source and
   the exported frames ``[0, n)`` it covers (it is included, never cut: the episode's physics starts from rest there);
@@ -15,9 +16,10 @@ conditions the motion was made and validated under, and to judge it.
   model): timestep, substeps per control step, integrator, friction cone, impratio, gravity, the robot's mass, the
   feet-floor friction (feet priority over the floor), and per object its mass, the hand-object friction (the
   object's: its geoms win the mixing by priority), the object-floor friction (explicit pairs) and restitution;
-* ``objects`` -- per object its name, the exported keys or body that carry its pose, and its geometry: a
-  primitive's or chair's parameters, or a mesh copied beside the motion (``file``, relative) with its ``scale``
-  (per axis, applied to the mesh's vertices in the object frame);
+* ``objects`` -- per object its name, the exported keys or body that carry its pose, where that pose sits on the
+  object (``pose_origin``: a primitive's centre, a chair's floor point under the seat, a mesh file's origin), and
+  its geometry: a primitive's or chair's parameters, or a mesh copied beside the motion (``file``, relative) with
+  its ``scale`` (per axis, applied to the mesh's vertices in the object frame);
 * ``validation`` -- the physicalize stage's figures for the episode (None for a retargeted, never simulated
   motion): ``valid``, the failure class and reason, tracking errors (mean per-joint position error, the root's
   largest error, the object's), the largest penetration, the foot-slide fraction, and every figure under ``all``.
@@ -36,7 +38,7 @@ import numpy as np
 from motion_export.bodies import ENTITY_JOINT_NAMES, entity_joints
 from motion_export.episodes import ExportEpisode, ExportSource
 from pipeline.errors import InputError
-from pipeline.geometry import MeshGeometry, geometry_to_dict
+from pipeline.geometry import Chair, MeshGeometry, geometry_to_dict
 from pipeline.robot import actuator_profile
 from pipeline.scene import build_scene
 from pipeline.terms.layout import CONTROL_FPS, SUBSTEPS
@@ -119,15 +121,28 @@ def copy_mesh(geometry: MeshGeometry, folder: Path, stem: str, name: str) -> str
     raise InputError(src, f"object {name} mesh", f"{folder / candidate} exists with other content")
 
 
+def pose_origin(geometry) -> str:
+    """Where on the object its exported pose (position, orientation) sits: the object frame's origin and axes."""
+    if isinstance(geometry, MeshGeometry):
+        return "the mesh file's own origin and axes: its vertex coordinates, times scale per axis, are the object frame"
+    if isinstance(geometry, Chair):
+        return "on the floor under the seat centre; +x forward (away from the back), z up"
+    return (
+        f"the {geometry.kind}'s centre; its axes the object frame's (MuJoCo's sizes: box half-extents along x, y, z; "
+        "cylinder and capsule along z)"
+    )
+
+
 def objects_entry(ep: ExportEpisode, folder: Path, stem: str, carried_by: list[str]) -> list[dict]:
-    """Per object its name, where the motion file carries its pose, and its geometry (meshes copied beside)."""
+    """Per object its name, where the motion file carries its pose and where that pose sits on it, and its
+    geometry (meshes copied beside)."""
     out = []
     for o, where in zip(ep.clip.objects, carried_by):
         geometry = geometry_to_dict(o.geometry)
         if isinstance(o.geometry, MeshGeometry):
             geometry["source_path"] = geometry.pop("path")
             geometry["file"] = copy_mesh(o.geometry, folder, stem, o.name)
-        out.append({"name": o.name, "pose_in": where, "geometry": geometry})
+        out.append({"name": o.name, "pose_in": where, "pose_origin": pose_origin(o.geometry), "geometry": geometry})
     return out
 
 
@@ -182,7 +197,7 @@ def sidecar(source: ExportSource, ep: ExportEpisode, fmt: str, motion: dict, obj
             "method": c.method,
             "provenance": c.provenance,
         },
-        "motion": {**motion, "source_fps": ep.fps, "source_frames": ep.frames, "velocities": ep.velocity_source},
+        "motion": {"velocities": ep.velocity_source, **motion, "source_fps": ep.fps, "source_frames": ep.frames},
         "start_prefix": start_prefix_entry(ep, motion["fps"], motion["frames"]),
         "actuator_profile": profile_entry(source.profile),
         "physics": physics_entry(ep, source.profile),

@@ -386,6 +386,14 @@ def test_unitree_csv_is_the_source_resampled_to_30hz(exported):
         np.testing.assert_allclose(obj[:, 0], np.interp(nt, t, pose[:, 0]), atol=CSV_TOL)
         side = json.loads((out / f"{stem}.json").read_text())
         assert side["motion"]["resampled"]["to_fps"] == 30.0 and side["motion"]["frames"] == len(want)
+        assert side["motion"]["velocities"].startswith("none")  # a CSV holds positions only
+        to_npz = side["motion"]["csv_to_npz"]
+        assert "W&B" in to_npz["writes"] and "--output-name" in to_npz["command"]
+        rows = np.loadtxt(path, delimiter=",")  # mjlab's csv_to_npz.py: lerp at k / 50 < (N - 1) / 30 s
+        t = np.arange(0.0, (len(rows) - 1) / 30.0, 1 / 50.0)
+        back = np.stack([np.interp(t, np.arange(len(rows)) / 30.0, rows[:, 7 + k]) for k in range(29)], 1)
+        err = np.abs(back - ep.clip.qpos[: len(t), 7:]).max()
+        assert to_npz["round_trip"]["max_joint_err_rad"] == pytest.approx(err, abs=1e-6) and err > 1e-4
     expect_input_error(lambda: read_clips(path), out, file=path, field="columns", match="read_robot_clip")
 
 
@@ -404,7 +412,24 @@ def test_sidecar_and_manifest(exported):
     assert (ph["timestep_s"], ph["substeps"], ph["control_hz"]) == (0.005, 4, 50) and ph["robot_mass_kg"] > 30
     assert ph["objects"][0]["mass_kg"] == ep.clip.objects[0].physics().mass
     assert side["objects"][0]["geometry"]["type"] in ("primitive", "chair")
+    assert side["objects"][0]["pose_origin"].startswith("the box's centre")  # the synthetic PickUp box
     assert side["motion"]["velocities"] == "simulation" and side["start_prefix"] is None
+
+
+def test_readme_names_what_export_motion_writes(exported):
+    """The README's example motion file is one the default input exports (the fixture's chain is the default one),
+    its formats are the exporter's, and it no longer calls the mjlab file BeyondMimic's."""
+    from pathlib import Path
+
+    _, _, summaries = exported
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    named = re.findall(r"datasets/default/export/(mjlab-npz|beyondmimic-npz)/(\w+\.npz)", readme)
+    assert named
+    for fmt, file in named:
+        assert (summaries[fmt].out / file).is_file(), file
+    for fmt in re.findall(r"FORMAT=([\w-]+)", readme[readme.index("make export-motion") :][:1500]):
+        assert fmt in FORMAT_NAMES, fmt
+    assert "mjlab / BeyondMimic" not in readme
 
 
 def test_action_scale_is_mjlabs():
