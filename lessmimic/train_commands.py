@@ -51,12 +51,19 @@ def _cmd_export(a: argparse.Namespace) -> int:
     import torch
 
     torch.set_num_threads(a.threads)
+    if a.viewer_site is not None and a.format != "lessmimic-demo":
+        raise InputError(a.viewer_site, "--viewer-site", "only with --format lessmimic-demo (the viewer's files)")
     if a.format == "lessmimic-demo":
         from train.export.demo import DEMO_FILES, export_demo
 
-        out = export_demo(a.policy, a.out, overwrite=a.overwrite)
+        out = export_demo(a.policy, a.out, overwrite=a.overwrite, viewer_site=a.viewer_site)
         sizes = ", ".join(f"{f} {(out / f).stat().st_size / 1e6:.2f} MB" for f in DEMO_FILES)
         print(f"exported {a.policy} in the released demo's contract -> {out}/ ({sizes})")
+        if a.viewer_site is not None:  # what the viewer's page fetches, resolved as it resolves it
+            from train.export.viewer_site import site_report
+
+            config = json.loads((out / DEMO_FILES[0]).read_text())
+            print("\n".join(f"  {line}" for line in site_report(a.viewer_site, config)))
         return 0
     from train.export.onnx_policy import CHECK_BATCH, export_onnx
 
@@ -257,6 +264,12 @@ def add_train(sub) -> None:
         "--out", default=None, help="the ONNX file (default: beside the checkpoint, .onnx; lessmimic-demo: a folder)"
     )
     p.add_argument("--overwrite", action="store_true", help="replace an existing export")
+    p.add_argument(
+        "--viewer-site",
+        default=None,
+        help="lessmimic-demo: the viewer's site folder (holding its index.html); the files go where its page fetches "
+        "them, DIR/examples/checkpoints/g1/ (the released JSON there needs --overwrite)",
+    )
     p.add_argument("--threads", type=int, default=1)
     p.set_defaults(func=_cmd_export)
     add_eval(sub)

@@ -203,3 +203,61 @@ def test_the_demo_export_refuses_other_contracts_gains_and_existing_files(bc_cor
     export_demo(checkpoint, out)
     expect_input_error(lambda: export_demo(checkpoint, out), tmp_path, file=out / DEMO_FILES[0], field="output")
     assert export_demo(checkpoint, out, overwrite=True) == out
+
+
+def _site(tmp_path):
+    """A viewer site laid out as the released one: the page in ``static/humanoid-policy-viewer/`` with its scene and
+    its released JSON, its SDF grids two folders up in ``lessmimic-live-demo-assets/``: ``(root, page folder)``."""
+    root = tmp_path / "lessmimic.github.io"
+    site = root / "static" / "humanoid-policy-viewer"
+    for path, text in (
+        (site / "index.html", "<html></html>"),
+        (site / "examples/scenes/g1/g1_interaction.xml", "<mujoco/>"),
+        (site / "examples/checkpoints/g1/interaction_policy.json", "{}"),
+        *((root / f"lessmimic-live-demo-assets/{k}_sdf.json", "{}") for k in ("box", "chair", "crate")),
+    ):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    return root, site
+
+
+def test_the_demo_export_lands_where_the_viewer_fetches_it(demo_policy, tmp_path, capsys):
+    """``--viewer-site``: every path the JSON names, resolved against the viewer's page as a browser resolves a
+    fetch (the site served from its root), is a file there, the ONNX ones ours; a bare name (the old JSON's) would
+    not be; a folder without the page, ``--out`` with a site and the released JSON without ``--overwrite`` are
+    one-line errors."""
+    from urllib.parse import urljoin, urlparse
+
+    from lessmimic.cli import main
+    from train.export.viewer_site import VIEWER_URLS, fetched_files
+
+    _, checkpoint, _ = demo_policy
+    root, site = _site(tmp_path)
+    released = site / "examples/checkpoints/g1/interaction_policy.json"
+    expect_input_error(lambda: export_demo(checkpoint, viewer_site=site), tmp_path, file=released, field="output")
+    expect_input_error(lambda: export_demo(checkpoint, viewer_site=root), tmp_path, file=root, field="viewer_site")
+    expect_input_error(lambda: export_demo(checkpoint, tmp_path / "x", viewer_site=site), tmp_path, file=site,
+                       field="viewer_site")  # fmt: skip
+    argv = ["export", "--policy", str(checkpoint), "--format", "lessmimic-demo", "--viewer-site", str(site)]
+    assert main([*argv, "--overwrite"]) == 0
+    printed = capsys.readouterr().out
+    assert "MISSING" not in printed and printed.count("(present)") == 6
+
+    page = "https://lessmimic.github.io/static/humanoid-policy-viewer/index.html"
+
+    def served(url: str):  # the file a fetch of url from the page reads
+        return root / urlparse(urljoin(page, url)).path.lstrip("/")
+
+    config = json.loads(served("./examples/checkpoints/g1/interaction_policy.json").read_text())  # defaultPolicy
+    assert config["policy_type"] == "interaction" and config["lessmimic"]
+    urls = fetched_files(config)
+    assert set(urls) == {"onnx.path", "latent_encoder.path", "scene_xml", *(f"sdf.objects.{k}" for k in
+                                                                           ("box", "chair", "crate"))}  # fmt: skip
+    for key, url in urls.items():
+        assert served(url).is_file(), (key, url)
+    for key, name in (("onnx.path", "policy.onnx"), ("latent_encoder.path", "latent_encoder.onnx")):
+        assert served(urls[key]) == site / "examples/checkpoints/g1" / name and urls[key] == VIEWER_URLS[name]
+        onnx.checker.check_model(onnx.load(str(served(urls[key]))))
+        assert not served(name).exists()  # the old bare name resolves beside the page: nothing there
+    inputs = {i.name for i in OnnxSession(served(urls["onnx.path"])).get_inputs()}
+    assert inputs == set(DEMO_INPUTS)

@@ -4,6 +4,9 @@ on that contract (``train-bc --contract lessmimic_demo`` under the ``lessmimic_d
 
 What the viewer fixes (its runner and config, read as facts; the repository has no licence, nothing is copied):
 
+* where it fetches the files: the JSON at ``./examples/checkpoints/g1/interaction_policy.json`` from its page, the
+  ONNX paths the JSON names also from its page (:mod:`train.export.viewer_site`, ``--viewer-site``);
+
 * ``latent_encoder.onnx``: ``state`` (B, 28) = 7 bodies' distances then their 7 x 3 body-frame gradients ->
   ``latent`` (B, 64); the viewer divides it by ``|z| + 1e-8``. Ours: the VAE's normaliser and encoder mean.
 * ``policy.onnx``: ``proprio`` (1, 465) grouped by term, newest step first: 5 x (29 q, 29 qd x 0.05), 5 x 3 gravity
@@ -38,6 +41,7 @@ from pipeline.stage.atomic import write_bytes_atomic
 from pipeline.terms import layout as L
 from train.export.metadata import policy_metadata
 from train.export.onnx_policy import check_finite, quiet_export
+from train.export.viewer_site import VIEWER_URLS, check_site, resolve
 from train.policy import InteractionPolicy, load_policy
 
 DEMO_PROFILE = "lessmimic_demo"
@@ -147,8 +151,8 @@ def viewer_config(policy: InteractionPolicy, checkpoint: str | Path) -> dict:
     profile = actuator_profile(DEMO_PROFILE)
     return {
         "policy_type": "interaction",
-        "onnx": {"path": "policy.onnx"},
-        "latent_encoder": {"path": "latent_encoder.onnx"},
+        "onnx": {"path": VIEWER_URLS["policy.onnx"]},  # fetched from the viewer's page, not the JSON's folder
+        "latent_encoder": {"path": VIEWER_URLS["latent_encoder.onnx"]},
         "sdf": {
             "objects": VIEWER_OBJECT_SDFS,
             "query_body_names": list(LESSMIMIC_DEMO_DF_BODIES),
@@ -172,11 +176,24 @@ def _onnx(graph: nn.Module, example: tuple, inputs: list[str], output: str) -> b
     return quiet_export(graph, example, inputs, output).model_proto.SerializeToString()
 
 
-def export_demo(checkpoint: str | Path, out: str | Path | None = None, overwrite: bool = False) -> Path:
+def export_demo(
+    checkpoint: str | Path,
+    out: str | Path | None = None,
+    overwrite: bool = False,
+    viewer_site: str | Path | None = None,
+) -> Path:
     """Write the demo's three files for the policy at ``checkpoint`` into the folder ``out`` (default beside it:
-    ``lessmimic_demo/``); one-line :class:`InputError` for a policy of another contract or gains, non-finite
-    weights, or existing files without ``overwrite``; nothing is written on any error."""
+    ``lessmimic_demo/``), or where the viewer whose site folder is ``viewer_site`` fetches them
+    (:mod:`train.export.viewer_site`: ``<site>/examples/checkpoints/g1/``; the JSON names the ONNX files by their
+    path from the viewer's page, so a plain ``out`` folder's three files go there too); one-line
+    :class:`InputError` for a policy of another contract or gains, non-finite weights, both ``out`` and
+    ``viewer_site``, a site folder without the viewer's page, or existing files without ``overwrite``; nothing is
+    written on any error."""
     checkpoint = Path(checkpoint)
+    if viewer_site is not None and out is not None:
+        raise InputError(viewer_site, "viewer_site", f"and --out {out} both given: the site decides where files go")
+    if viewer_site is not None:
+        out = resolve(check_site(viewer_site), VIEWER_URLS[DEMO_FILES[0]]).parent
     out = Path(out) if out is not None else checkpoint.parent / "lessmimic_demo"
     existing = [f for f in DEMO_FILES if (out / f).exists()]
     if existing and not overwrite:
