@@ -1,5 +1,5 @@
-"""Commands on one file or one dataset (``inspect``, ``evaluate-retarget``, ``load``, ``publish``, ``merge``), kept
-apart from the per-stage commands of :mod:`lessmimic.cli`."""
+"""Commands on one file or one dataset (``inspect``, ``evaluate-retarget``, ``load``, ``verify``, ``publish``,
+``merge``), kept apart from the per-stage commands of :mod:`lessmimic.cli`."""
 
 from __future__ import annotations
 
@@ -7,12 +7,23 @@ import argparse
 from pathlib import Path
 
 
+def out_path(path: str) -> Path:
+    """``--out``'s path, its folder there already: a command makes no folder above the file (or folder) it is
+    told to write, so a mistyped path is an error, not a new tree (``/nonexistent/x.mcap`` made ``/nonexistent``)."""
+    from pipeline.errors import InputError
+
+    out = Path(path)
+    if not out.parent.is_dir():
+        raise InputError(out, "--out", f"its folder {out.parent} does not exist (make it first)")
+    return out
+
+
 def _cmd_inspect(a: argparse.Namespace) -> int:
     from pipeline.readers import read_clips, read_robot_clip
     from pipeline.stage.inspect_log import write_human_log, write_robot_log
 
     src = Path(a.file)
-    out = Path(a.out)
+    out = out_path(a.out)
     if a.robot:
         from pipeline.geometry import MeshGeometry
 
@@ -31,10 +42,11 @@ def _cmd_evaluate_retarget(a: argparse.Namespace) -> int:
     from pipeline.stage.atomic import write_json_atomic
     from retarget.metrics import evaluate_file
 
+    out = out_path(a.out) if a.out else None
     metrics = evaluate_file(a.file, human_path=a.human, object_mesh=a.object_mesh)
     text = json.dumps({"file": str(a.file), **metrics}, indent=2, default=float)
-    if a.out:
-        write_json_atomic(Path(a.out), json.loads(text))
+    if out is not None:
+        write_json_atomic(out, json.loads(text))
     print(text)
     return 0
 
@@ -49,6 +61,17 @@ def _cmd_load(a: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_verify(a: argparse.Namespace) -> int:
+    from pipeline.dataset.verify import dataset_folders, verify_dataset
+
+    for root in dataset_folders(a.dataset):
+        r = verify_dataset(root)
+        made = f", made from {r['upstream']}/ as it is" if r["upstream"] else ""
+        print(f"{r['dataset']}: ok: {r['files']} files ({r['bytes']} bytes) match their sha256; "
+              f"{r['episodes']} episodes, {r['frames']} frames within range{made}")  # fmt: skip
+    return 0
+
+
 def _cmd_publish(a: argparse.Namespace) -> int:
     from pipeline.dataset.hub import publish
 
@@ -59,7 +82,7 @@ def _cmd_publish(a: argparse.Namespace) -> int:
 def _cmd_merge(a: argparse.Namespace) -> int:
     from pipeline.dataset.merge import merge_datasets
 
-    print(merge_datasets([Path(r) for r in a.shards], Path(a.out), a.repo_id, overwrite=a.overwrite))
+    print(merge_datasets([Path(r) for r in a.shards], out_path(a.out), a.repo_id, overwrite=a.overwrite))
     return 0
 
 
@@ -85,6 +108,13 @@ def add_tools(sub) -> None:
     p = sub.add_parser("load", help="load a dataset by path or hub repo id with LeRobot's loader and summarise it")
     p.add_argument("dataset")
     p.set_defaults(func=_cmd_load)
+    p = sub.add_parser(
+        "verify",
+        help="check a dataset: every file against its sha256, its chain, info.json against the data, every value in "
+        "its column's range",
+    )
+    p.add_argument("dataset", help="a dataset folder, datasets/<NAME>/ (every stage), a dataset NAME, or a hub repo id")
+    p.set_defaults(func=_cmd_verify)
     p = sub.add_parser("publish", help="push a dataset folder to the Hugging Face hub")
     p.add_argument("dataset")
     p.add_argument("--repo-id", required=True)

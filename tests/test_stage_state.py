@@ -44,7 +44,8 @@ def test_by_content_ignores_mtime_and_folder_but_not_bytes(tmp_path):
     assert files_fingerprint([a], by_content=True) != files_fingerprint([b], by_content=True)
 
 
-def test_dataset_fingerprint_stable_across_reads_new_on_rewrite(tmp_path):
+def test_dataset_fingerprint_stable_across_reads_new_on_new_content(tmp_path):
+    """The fingerprint is of the data (issue 55): the same content rewritten keeps it, other content changes it."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     from pipeline.clip import RobotClip
@@ -58,7 +59,12 @@ def test_dataset_fingerprint_stable_across_reads_new_on_rewrite(tmp_path):
     ds = LeRobotDataset("lessmimic/t-retargeted", root=root)
     assert ds.num_frames == 10 and ds[3]["observation.state"].shape == (36,)
     assert dataset_fingerprint(root) == first
-    (root / "report.json").write_text("{}")
+    (root / "report.json").write_text("{}")  # a stage's report beside the data is not the data
+    assert dataset_fingerprint(root) == first
+    write_dataset(root, "lessmimic/t-retargeted", 50, features, episodes, overwrite=True)
+    assert dataset_fingerprint(root) == first
+    features, episodes = robot_clips_to_episodes([RobotClip(qpos[:9], 50, "hand-made:stand", task="stand")])
+    write_dataset(root, "lessmimic/t-retargeted", 50, features, episodes, overwrite=True)
     assert dataset_fingerprint(root) != first
 
 

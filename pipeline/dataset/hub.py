@@ -13,8 +13,10 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
+from pipeline.dataset.chain import checked_fingerprint
 from pipeline.dataset.read import read_info, read_sidecar
 from pipeline.dataset.schema import CODEBASE_VERSION, validate_repo_id
+from pipeline.dataset.verify import OFFLINE
 from pipeline.errors import InputError
 
 #: Never uploaded: LeRobot's temporary images, and hidden files (e.g. the ``.cache`` that a hub
@@ -76,10 +78,17 @@ def load(path_or_repo_id: str | Path, *, root: str | Path | None = None, **kwarg
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     path = Path(path_or_repo_id)
-    if (path / "meta/info.json").is_file():
+    if path.is_dir():  # a local folder: checked against its checksums, refused when stale (pipeline.dataset.chain)
+        read_info(path)  # a missing meta/info.json named as such
+        checked_fingerprint(path)
         repo_id = read_sidecar(path).get("repo_id") or f"local/{path.name}"
         return LeRobotDataset(repo_id, root=path, **kwargs)
-    if isinstance(path_or_repo_id, Path) or path.is_absolute() or str(path_or_repo_id).startswith("."):
+    if isinstance(path_or_repo_id, Path) or path.is_absolute() or str(path_or_repo_id).startswith(".") or path.exists():
         raise InputError(path, "dataset", "is not a LeRobot dataset folder (meta/info.json missing)")
     repo_id = validate_repo_id(str(path_or_repo_id))
-    return LeRobotDataset(repo_id, root=root, **kwargs)
+    try:
+        ds = LeRobotDataset(repo_id, root=root, **kwargs)
+    except OSError as exc:  # huggingface_hub's offline and connection errors are OSErrors: one line, not five
+        raise InputError(repo_id, "hub", f"{OFFLINE} ({type(exc).__name__})") from None
+    checked_fingerprint(Path(ds.root))
+    return ds

@@ -16,6 +16,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.dataset.card import DatasetCard
+from pipeline.dataset.chain import checked_fingerprint
+from pipeline.dataset.checksums import read_checksums
 from pipeline.dataset.schema import INDEX_COLUMNS, SIDECAR_DATASET, SIDECAR_EPISODES, Episode, Feature
 from pipeline.errors import InputError
 from pipeline.robot import DEFAULT_PROFILE
@@ -23,6 +25,8 @@ from pipeline.robot import DEFAULT_PROFILE
 
 def read_info(root: str | Path) -> dict:
     path = Path(root) / "meta/info.json"
+    if not path.is_file() and read_checksums(Path(root)) is not None:
+        raise InputError(root, "meta/info.json", "missing (the checksums list it): the dataset is incomplete")
     if not path.is_file():
         raise InputError(path, "dataset", "is not a LeRobot dataset (meta/info.json missing)")
     return json.loads(path.read_text())
@@ -83,8 +87,10 @@ def _to_numpy(col: pa.ChunkedArray) -> np.ndarray:
 
 
 def read_columns(root: str | Path, keys: Sequence[str]) -> dict[str, np.ndarray]:
-    """``{key: (N, dim)}`` over the whole dataset in ``index`` order."""
+    """``{key: (N, dim)}`` over the whole dataset in ``index`` order; the dataset's files checked against its
+    checksums first, and a stale one refused (:func:`pipeline.dataset.chain.checked_fingerprint`)."""
     root = Path(root)
+    checked_fingerprint(root)
     cols = list(dict.fromkeys([*keys, "index"]))
     table = pa.concat_tables([pq.read_table(f, columns=cols) for f in _data_files(root)])
     out = {k: _to_numpy(table.column(k)) for k in cols}

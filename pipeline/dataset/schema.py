@@ -44,6 +44,7 @@ DATA_PATH = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
 EPISODES_PATH = "meta/episodes/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
 SIDECAR_EPISODES = "meta/lessmimic_episodes.jsonl"
 SIDECAR_DATASET = "meta/lessmimic.json"
+SIDECAR_CHECKSUMS = "meta/lessmimic_checksums.json"  # every file's sha256: pipeline.dataset.checksums
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,95}$")
 
 

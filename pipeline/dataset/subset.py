@@ -11,15 +11,18 @@ on it has never seen the held-out variants, so the evaluation on the full corpus
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from collections.abc import Sequence
 from dataclasses import replace
+from pathlib import Path
 
 from pipeline.dataset.read import iter_episodes, read_card, read_episode_meta, read_features, read_info
 from pipeline.dataset.write import write_dataset
 from pipeline.errors import InputError
 from pipeline.geometry import provenance_variant
 from pipeline.stage.atomic import write_json_atomic
+from pipeline.stage.lock import LOCK_NAME
 from pipeline.stage.paths import stage_dir
 
 STAGES = ("retargeted", "physicalized", "features")  # what a training run reads
@@ -50,7 +53,7 @@ def subset_corpus(name: str, out: str, variants: Sequence[str], *, overwrite: bo
     for stage in STAGES:
         read_info(stage_dir(name, stage))
     final = stage_dir(out, STAGES[0]).parent
-    if final.exists() and not overwrite:
+    if _holds_more_than_its_lock(final) and not overwrite:
         raise InputError(final, "out", "exists; pass --overwrite to replace it")
     tmp = final.with_name(f".{final.name}.tmp")
     shutil.rmtree(tmp, ignore_errors=True)
@@ -71,10 +74,21 @@ def subset_corpus(name: str, out: str, variants: Sequence[str], *, overwrite: bo
         )
         summary["episodes"][stage] = read_info(tmp / stage)["total_episodes"]
     write_json_atomic(tmp / SUBSET_FILE, summary)
-    if final.exists():
-        shutil.rmtree(final)
-    tmp.rename(final)
+    if final.exists():  # the old corpus out, its lock kept (the writer holding it is this command)
+        for old in final.iterdir():
+            if old.name != LOCK_NAME:
+                shutil.rmtree(old) if old.is_dir() else old.unlink()
+    final.mkdir(parents=True, exist_ok=True)
+    for new in tmp.iterdir():
+        os.replace(new, final / new.name)
+    tmp.rmdir()
     return summary
+
+
+def _holds_more_than_its_lock(folder: Path) -> bool:
+    """Whether ``folder`` exists with more in it than the writer lock (:mod:`pipeline.stage.lock`) this command
+    took."""
+    return folder.exists() and any(p.name != LOCK_NAME for p in folder.iterdir())
 
 
 def read_subset(name: str) -> dict | None:

@@ -8,6 +8,7 @@ On disk (all paths relative to the dataset root)::
     meta/episodes/chunk-000/file-000.parquet  per-episode index ranges, tasks and stats
     meta/lessmimic.json                       feature descriptions/units, the card, repo_id
     meta/lessmimic_episodes.jsonl             per episode: episode_index, task, length + its meta
+    meta/lessmimic_checksums.json             every file's sha256, the upstream's fingerprint (checksums, chain)
     README.md                                 the dataset card (:mod:`pipeline.dataset.card`)
 
 Column types, parquet schema metadata, ``info.json`` and the episodes table are LeRobot's own
@@ -33,6 +34,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.dataset.card import DatasetCard, render_card
+from pipeline.dataset.chain import remember, upstream_record
+from pipeline.dataset.checksums import content_fingerprint, write_checksums
+from pipeline.dataset.ranges import check_ranges
 from pipeline.dataset.schema import (
     CODEBASE_VERSION,
     DATA_PATH,
@@ -266,10 +270,12 @@ def write_dataset(
     try:
         staging.mkdir()
         _write_into(staging, repo_id, int(fps), features, episodes, robot_type, card, data_file_size_mb, chunks_size)
+        manifest = write_checksums(staging, upstream_record(root))
         _commit(staging, root, overwrite)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
+    remember(root, content_fingerprint(manifest))
     return root
 
 
@@ -284,6 +290,7 @@ def _write_into(root, repo_id, fps, features, episodes, robot_type, card, data_f
     try:
         for ep_idx, ep in enumerate(episodes):
             data = validate_episode(features, ep, f"dataset {repo_id} episode {ep_idx}")
+            check_ranges(data, fps, f"dataset {repo_id} episode {ep_idx}")
             T = next(iter(data.values())).shape[0]
             task_idx = tasks.setdefault(ep.task, len(tasks))
             frame = np.arange(T, dtype=np.int64)

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
 
+from pipeline.dataset.chain import stale_reason
 from pipeline.dataset.write import check_target
 from pipeline.stage.atomic import write_json_atomic, write_pickle_atomic
 from pipeline.stage.executor import map_ordered
@@ -72,30 +73,36 @@ class StageRun:
         self.logs, self.work = logs_dir(self.out), work_dir(self.out)
         self.clips = self.work / "clips"
         self.replaces = False  # set by begin(): whether write_dataset may replace an existing `out`
+        self._said_stale = False
 
     def finished(self) -> dict | None:
         """The report of a finished run with this fingerprint whose dataset (if it wrote one) is in place."""
         report = up_to_date(self.logs / "report.json", self.fingerprint)
         if report is None or (report.get("dataset_written", True) and not self.out.is_dir()):
             return None
-        return report
+        return None if stale_reason(self.out) else report  # made from an upstream since rewritten: redo it
 
     def check(self, overwrite: bool) -> bool:
         """Whether this run may write ``out``, writing nothing: an existing dataset is replaced only with
-        ``overwrite`` or when this same run (same fingerprint, interrupted) wrote it; otherwise one
+        ``overwrite``, when this same run (same fingerprint, interrupted) wrote it, or when it is stale (made from
+        an upstream dataset since rewritten: :mod:`pipeline.dataset.chain`); otherwise one
         :class:`~pipeline.errors.InputError` line. A stage that reads the user's input calls it before reading,
         and :meth:`begin` after, so a refused input leaves no resume record behind."""
         own = up_to_date(self.work / "run.json", self.fingerprint) is not None
-        check_target(self.out, overwrite or own)
-        return own
+        stale = not overwrite and not own and self.out.is_dir() and stale_reason(self.out)
+        check_target(self.out, overwrite or own or bool(stale))
+        if stale and not self._said_stale:
+            print(f"{self.out}: {stale}: redoing it")
+            self._said_stale = True
+        return own or bool(stale)
 
     def begin(self, overwrite: bool) -> None:
         """Claim ``out`` for this run (:meth:`check`) and record the fingerprint in ``.work/<stage>/run.json``."""
-        own = self.check(overwrite)
-        if overwrite or not own:
+        may_replace = self.check(overwrite)
+        if overwrite or up_to_date(self.work / "run.json", self.fingerprint) is None:
             shutil.rmtree(self.work, ignore_errors=True)  # a fresh run, or another run's leftovers
         write_json_atomic(self.work / "run.json", {KEY: self.fingerprint})
-        self.replaces = overwrite or own
+        self.replaces = overwrite or may_replace
 
     def map(
         self,

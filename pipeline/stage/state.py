@@ -15,6 +15,8 @@ import json
 from collections.abc import Iterable
 from pathlib import Path
 
+from pipeline.dataset.chain import checked_fingerprint
+
 KEY = "fingerprint"
 
 
@@ -49,10 +51,14 @@ def files_fingerprint(paths: Iterable[str | Path], *, by_content: bool = False) 
 
 
 def dataset_fingerprint(root: str | Path) -> str:
-    """A hex digest of a LeRobot dataset's identity: the bytes of ``meta/info.json``, of the
-    ``meta/episodes`` parquet files and of its ``report.json`` (those a stage rewrites every run,
-    so a rewritten dataset gets a new digest; reading the dataset leaves it unchanged)."""
+    """A hex digest of a LeRobot dataset's content: the sha256 of every data file, from its checksum manifest
+    after every byte was checked against it (:func:`pipeline.dataset.chain.checked_fingerprint`: a corrupted or
+    stale dataset is one :class:`~pipeline.errors.InputError` line), so a stage records the exact data it read.
+    A dataset without a manifest (written before them): the bytes of ``meta/info.json``, of the ``meta/episodes``
+    parquet files and of its ``report.json`` (those a stage rewrites every run)."""
     root = Path(root)
+    if (checked := checked_fingerprint(root)) is not None:
+        return checked
     h = hashlib.sha256()
     for p in [root / "meta" / "info.json", *_files_under(root / "meta" / "episodes"), root / "report.json"]:
         if p.is_file():
