@@ -10,7 +10,7 @@ PY     := $(VENV)/bin/python
 CLI    := $(VENV)/bin/lessmimic
 NAME   ?= default
 INPUT  ?=
-STAGE_ARGS = --name $(NAME) $(if $(INPUT),--input $(INPUT)) $(if $(OVERWRITE),--overwrite)
+STAGE_ARGS = --name $(NAME) $(if $(INPUT),--input "$(INPUT)") $(if $(OVERWRITE),--overwrite)
 # Geometry augmentation (retarget/augment.py): SCALES=0.6,0.8,1,1.2,1.4 retargets every clip once per object scale
 # (1: the clip itself; sx:sy:sz per axis), SHAPES=box,cylinder also as a circular cylinder (primitive boxes only).
 SCALES ?=
@@ -57,7 +57,7 @@ retarget: install
 OBJECT_MESH ?=
 OBJECT_MASS ?=
 import: install
-	$(CLI) import --name $(NAME) $(if $(INPUT),--input $(INPUT)) $(if $(OVERWRITE),--overwrite) $(RUN_ARGS) \
+	$(CLI) import --name $(NAME) $(if $(INPUT),--input "$(INPUT)") $(if $(OVERWRITE),--overwrite) $(RUN_ARGS) \
 		$(if $(OBJECT_MESH),--object-mesh $(OBJECT_MESH)) $(if $(OBJECT_MASS),--object-mass $(OBJECT_MASS))
 
 TEACHER ?= base

@@ -21,10 +21,12 @@ from lessmimic.corpus_commands import add_corpus
 from lessmimic.export_commands import add_export_motion
 from lessmimic.tool_commands import add_tools
 from lessmimic.train_commands import add_train
-from pipeline.errors import INTERRUPTED, InputError, os_error_line
+from pipeline.errors import INTERRUPTED, SUBJECT_HEIGHT_M, InputError, os_error_line
 from pipeline.stage.executor import EXECUTORS
 from pipeline.stage.lock import writer_lock
+from pipeline.stage.outputs import mujoco_log_into, temporary_arrow_cache
 from pipeline.stage.state import up_to_date_line
+from pipeline.stage.undo import Undo
 
 
 def _stage_args(p: argparse.ArgumentParser) -> None:
@@ -58,6 +60,10 @@ def _cmd_retarget(a: argparse.Namespace) -> int:
     from lessmimic.chain import retarget
     from retarget.augment import parse_variants
 
+    if a.height is not None and not SUBJECT_HEIGHT_M[0] <= a.height <= SUBJECT_HEIGHT_M[1]:  # before any work
+        raise InputError(
+            a.height, "--height", "must be the subject's height in metres, within {:g}-{:g}".format(*SUBJECT_HEIGHT_M)
+        )
     variants = parse_variants(a.augment_scales, a.augment_shapes) if a.augment_scales else ()
     report = retarget(
         a.input,
@@ -72,6 +78,9 @@ def _cmd_retarget(a: argparse.Namespace) -> int:
     if report.get("up_to_date"):
         print(up_to_date_line("retarget", a.name, "retargeted"))
         return 0
+    if not report["clips"]:
+        print(f"retargeted nothing: every clip failed ({len(report['failed'])}); datasets/{a.name}/ is left as it was")
+        return 1
     s = report["summary"]
     print(f"retargeted {len(report['clips'])} clip(s), {len(report['failed'])} failed -> datasets/{a.name}/retargeted/")
     if report.get("not_applicable"):
@@ -87,7 +96,7 @@ def _cmd_retarget(a: argparse.Namespace) -> int:
     ):
         if k in s:
             print(f"  {k}: {s[k]:.4g}")
-    return 1 if report["failed"] and not report["clips"] else 0
+    return 0
 
 
 def _cmd_import(a: argparse.Namespace) -> int:
@@ -211,7 +220,10 @@ def _add_retarget(sub) -> None:
     _stage_args(p)
     _run_args(p)
     p.add_argument(
-        "--height", type=float, default=None, help="subject height override in metres (outside 1.0-2.3 m needs it)"
+        "--height",
+        type=float,
+        default=None,
+        help="subject height override in metres, 0.5-2.5 (a subject outside 1.0-2.3 m needs it)",
     )
     p.add_argument(
         "--augment-scales",
@@ -316,12 +328,35 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _run(args: argparse.Namespace) -> int:
+    """The command; one that writes into ``datasets/<NAME>/`` holds its lock, keeps what libraries write inside its
+    outputs (:mod:`pipeline.stage.outputs`) and, when it fails (an error, or exit status 1: nothing written), leaves
+    the folder as it found it (:class:`pipeline.stage.undo.Undo`)."""
+    with writer_lock(getattr(args, args.writes) if getattr(args, "writes", None) else None) as lock:
+        if lock is None:
+            return args.func(args)
+        undo = Undo(lock.parent)
+        try:
+            with temporary_arrow_cache(), mujoco_log_into(lock.parent / "logs" / "mujoco.log"):
+                status = args.func(args)
+        except (Exception, SystemExit):
+            undo.restore()
+            raise
+        except BaseException:  # Ctrl-C: what is finished stays for the resume
+            undo.drop()
+            raise
+        if status == 1:
+            undo.restore()
+        else:
+            undo.drop()
+        return status
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command; a bad input, a refused lock, an OS error or Ctrl-C is one ``error:`` line on stderr."""
     args = build_parser().parse_args(argv)
     try:
-        with writer_lock(getattr(args, args.writes) if getattr(args, "writes", None) else None):
-            return args.func(args)
+        return _run(args)
     except (InputError, FileExistsError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -43,3 +43,7 @@ def os_error_line(exc: OSError) -> str:
     if exc.filename2 is not None:
         where = f"{exc.filename} -> {exc.filename2}: "
     return (where + reason).replace("\n", " ")
+
+
+#: A human subject's height in metres: anything outside is a wrong unit or a wrong number, never a person.
+SUBJECT_HEIGHT_M = (0.5, 2.5)

@@ -38,6 +38,8 @@ import csv
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from pipeline.clip import HumanClip, RobotClip
 from pipeline.errors import InputError
 from pipeline.geometry import ObjectGeometry
@@ -80,11 +82,33 @@ def csv_kind(path: str | Path) -> str:
     return "robot" if robot else "keypoints"
 
 
+#: Faster than this between two frames, a clip's root (the skeleton's first joint without a parent) is a broken file
+#: or a unit error (a sprinter peaks near 12 m/s), never a person.
+MAX_ROOT_SPEED_MPS = 15.0
+
+
+def check_root_speed(clip: HumanClip, path: str | Path) -> HumanClip:
+    """``clip``, or an :class:`InputError` naming the first frame whose root moved faster than
+    :data:`MAX_ROOT_SPEED_MPS` since the frame before."""
+    root = int(np.flatnonzero(np.asarray(clip.skeleton.parents) < 0)[0])
+    speed = np.linalg.norm(np.diff(clip.joint_pos[:, root], axis=0), axis=1) * clip.fps
+    if (speed > MAX_ROOT_SPEED_MPS).any():
+        k = int(np.flatnonzero(speed > MAX_ROOT_SPEED_MPS)[0])
+        name = clip.skeleton.joint_names[root]
+        why = f"moves {speed[k]:.4g} m/s since the frame before (above {MAX_ROOT_SPEED_MPS:g} m/s): a jump, not motion"
+        raise InputError(path, f"{name} position", why, frame=k + 1)
+    return clip
+
+
 def read_clip(
     path: str | Path, *, body_model: str | Path | None = None, fps: float | None = None, mesh: str | Path | None = None
 ) -> HumanClip:
-    """One human clip file, dispatched by suffix (see the module doc)."""
-    path = Path(path)
+    """One human clip file, dispatched by suffix (see the module doc); its root's speed checked
+    (:func:`check_root_speed`)."""
+    return check_root_speed(_read_clip(Path(path), body_model, fps, mesh), path)
+
+
+def _read_clip(path: Path, body_model, fps, mesh) -> HumanClip:
     suffix = path.suffix.lower()
     if suffix == ".bvh":
         from pipeline.readers.bvh import read_bvh
@@ -157,6 +181,8 @@ def read_clips(
         raise InputError(path, "input", "does not exist")
     if path.is_file():
         return [read_clip(path, body_model=body_model, fps=fps, mesh=mesh)]
+    if not path.is_dir():
+        raise InputError(path, "input", "is neither a file nor a folder (a FIFO or a device?)")
     clips = []
     for p in _candidates(path):
         try:

@@ -190,7 +190,26 @@ def parse_bvh(path: str | Path) -> BvhData:
         c = int(np.flatnonzero(bad[k])[0])
         owner = [(n.name, ch) for n in nodes for ch in n.channels][c]
         raise InputError(src, f"{owner[0]}.{owner[1]}", "is NaN or infinite", frame=k)
+    _check_rotations(nodes, motion, src)
     return BvhData(nodes, motion, dt)
+
+
+MAX_ROTATION_DEG = 720.0  # +-4 pi: an Euler angle beyond two full turns is no pose a joint takes, but a broken file
+
+
+def _check_rotations(nodes: list[_Node], motion: np.ndarray, src: str) -> None:
+    """An Euler angle beyond +-:data:`MAX_ROTATION_DEG` is an :class:`InputError` naming the joint, channel and
+    frame (read on, it wraps to an arbitrary pose without a word)."""
+    owners = [(n.name, ch) for n in nodes for ch in n.channels]
+    rot = np.array([ch.endswith("rotation") for _, ch in owners], dtype=bool)
+    bad = np.zeros_like(motion, dtype=bool)
+    bad[:, rot] = np.abs(motion[:, rot]) > MAX_ROTATION_DEG
+    if bad.any():
+        k = int(np.flatnonzero(bad.any(axis=1))[0])
+        c = int(np.flatnonzero(bad[k])[0])
+        name, ch = owners[c]
+        why = f"{motion[k, c]:.6g} degrees is beyond +-{MAX_ROTATION_DEG:g} (two full turns): not a joint angle"
+        raise InputError(src, f"{name}.{ch}", why, frame=k)
 
 
 def forward_kinematics(data: BvhData, rest: bool = False) -> tuple[np.ndarray, np.ndarray]:

@@ -102,6 +102,9 @@ def read_c3d(path: str | Path, *, up: str = "auto", max_gap: float = 0.25, long_
         raise InputError(src, "POINT:USED", "the file has no 3-D markers")
     if pts.shape[2] == 0:
         raise InputError(src, "frames", "has zero frames")
+    if frames is not None and pts.shape[2] < frames:  # ezc3d reads a cut file up to where it ends, without a word
+        why = f"the header promises {frames} frames (first/last frame), the file holds {pts.shape[2]} (truncated?)"
+        raise InputError(src, "frames", why, frame=pts.shape[2])
     fps = float(_param(c, "POINT", "RATE", [c["header"]["points"]["frame_rate"]])[0])
     unit_name = (_param(c, "POINT", "UNITS", ["mm"]) or ["mm"])[0].strip().lower()
     if unit_name not in _UNITS:

@@ -53,7 +53,7 @@ import numpy as np
 
 from pipeline.body_height import estimate_height, plausible_height
 from pipeline.clip import HumanClip, ObjectTrack
-from pipeline.errors import InputError, first_bad_frame
+from pipeline.errors import SUBJECT_HEIGHT_M, InputError, first_bad_frame
 from pipeline.geometry import MeshGeometry
 from pipeline.materials import object_physics_for
 from pipeline.readers.amass import SMPLH_FINGERS, SMPLH_JOINT_NAMES, SMPLH_SKELETON
@@ -206,7 +206,13 @@ def height_from_dict(path: str | Path, subject: str | None) -> float | None:
     d = load_numpy_pickle(pkl, "height_dict")
     if not isinstance(d, dict):
         raise InputError(pkl, "height_dict", f"is a {type(d).__name__}, expected a dict subject -> metres")
-    return plausible_height(float(d[subject])) if subject in d else None
+    if subject not in d:
+        return None
+    height = float(d[subject])
+    if not (np.isfinite(height) and SUBJECT_HEIGHT_M[0] <= height <= SUBJECT_HEIGHT_M[1]):
+        lo, hi = SUBJECT_HEIGHT_M
+        raise InputError(pkl, f"height_dict[{subject!r}]", f"{height:g} m is not a subject height ({lo}-{hi} m)")
+    return plausible_height(height)
 
 
 def read_omomo(path: str | Path, *, mesh: str | Path | None = None, subject_height: float | None = None) -> HumanClip:
