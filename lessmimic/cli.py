@@ -194,7 +194,11 @@ def _cmd_physicalize_residual(a: argparse.Namespace) -> int:
 def _cmd_features(a: argparse.Namespace) -> int:
     from features.compute import FeatureConfig
     from features.stage import run_stage
+    from pipeline.dataset.read import read_info
+    from pipeline.stage.paths import stage_dir
 
+    if (src := stage_dir(a.name, "physicalized")).is_dir():  # a damaged dataset is named as such, not "nothing to do"
+        read_info(src)
     cfg = FeatureConfig(**({"links": tuple(a.links.split(","))} if a.links else {}))
     report = run_stage(a.name, overwrite=a.overwrite, config=cfg, jobs=a.jobs, executor=a.executor)
     if report.get("up_to_date"):

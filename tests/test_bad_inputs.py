@@ -181,3 +181,22 @@ def test_ctrl_c_is_one_line(tmp_path):
     lines = [ln for ln in err.splitlines() if ln.startswith("error") or "Traceback" in ln]
     assert lines == ["error: interrupted (Ctrl-C): nothing half-written was kept; the same command resumes where it "
                      "stopped"]  # fmt: skip
+
+
+def test_features_on_a_physicalized_dataset_without_its_info_names_it(tmp_path, monkeypatch, capsys):
+    """Issue 55, case 3: a deleted meta/info.json made features say 'nothing to do ... none valid'."""
+    from pipeline.clip import RobotClip
+    from pipeline.dataset.clips import robot_clips_to_episodes
+    from pipeline.dataset.write import write_dataset
+    from pipeline.robot import actuator_profile, default_qpos
+
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path))
+    qpos = default_qpos(actuator_profile("mjlab"))[None].repeat(10, 0)
+    features, episodes = robot_clips_to_episodes([RobotClip(qpos, 50, "hand-made:stand", task="stand")])
+    root = write_dataset(tmp_path / "x" / "physicalized", "lessmimic/x-physicalized", 50, features, episodes)
+    (root / "meta/info.json").unlink()
+    before = _tree(tmp_path)
+    assert main(["features", "--name", "x"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"error: {root}: meta/info.json: missing (the checksums list it): the dataset is incomplete"
+    assert _tree(tmp_path) == before
