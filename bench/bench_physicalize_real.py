@@ -48,7 +48,7 @@ torch.set_num_threads(1)
 
 import numpy as np  # noqa: E402
 
-from physicalize.clip import physicalize_clip  # noqa: E402
+from physicalize.clip import physicalize_clip, robot_alone  # noqa: E402
 from pipeline.materials import object_physics_for  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
 from pipeline.stage.executor import map_ordered  # noqa: E402
@@ -92,9 +92,9 @@ def with_physics(human, end: str):
     return replace(human, objects=tuple(objects))
 
 
-def run_clip(path: Path, end: str = "nominal") -> dict:
-    """Retarget and physicalize one clip file, its objects' physics at ``end`` of their ranges; its figures,
-    verdict and timings."""
+def run_clip(path: Path, end: str = "nominal", robot_only: bool = False) -> dict:
+    """Retarget and physicalize one clip file, its objects' physics at ``end`` of their ranges (``robot_only``: its
+    body motion alone, :func:`physicalize.clip.robot_alone`); its figures, verdict and timings."""
     row = {"clip": path.name, "folder": path.parent.name, "object": object_kind(path), "kind": "unread"}
     stage, c0 = "retarget_cpu_s", time.process_time()
     try:
@@ -111,7 +111,7 @@ def run_clip(path: Path, end: str = "nominal") -> dict:
         row["opposition_human"] = robot.provenance.get("human_hand_opposition")
         row["opposition_g1"] = g1_hand_opposition(human, robot)
         stage, c0 = "physicalize_cpu_s", time.process_time()
-        _, roll, figures, _ = physicalize_clip(robot)
+        _, roll, figures, _ = physicalize_clip(robot_alone(robot) if robot_only else robot)
         row["physicalize_cpu_s"] = time.process_time() - c0
         row["seconds"] = robot.frames / robot.fps
     except Exception as exc:  # noqa: BLE001 - a clip that raises is a row of the table, not the end of the bench
@@ -133,6 +133,31 @@ def verdict_line(row: dict) -> str:
     100 characters."""
     reason = row["reason"].removeprefix(f"{row['verdict']}: ")
     return f"{row['verdict']}: {reason if row.get('rejected') else reason[:100]}"
+
+
+TRACE = (
+    ("fell_at_s", "fell", "{:5.2f}"),
+    ("drift_onset_s", "drift@", "{:5.2f}"),
+    ("drift_onset_support", "on", "{:>6s}"),
+    ("pelvis_drift_pre_fall_m", "pel", "{:5.2f}"),
+    ("com_drift_pre_fall_m", "com", "{:5.2f}"),
+    ("step_adjustments", "steps", "{:3d}"),
+    ("step_adjust_max_m", "max", "{:4.2f}"),
+    ("support_mismatch_frac", "mism", "{:4.2f}"),
+    ("reference_single_support_max_s", "ss", "{:4.1f}"),
+    ("plan_zmp_outside_max_m", "zmp", "{:4.2f}"),
+)
+
+
+def trace_line(row: dict) -> str:
+    """The balance trace of a row (:mod:`physicalize.balance`): when it fell, when and on which support the pelvis
+    drifted, the drift 0.2 s before the fall, the capture-point steps, planned vs measured foot contacts, the longest
+    single support and the planned ZMP's excursion from the support."""
+    out = []
+    for key, name, fmt in TRACE:
+        v = row.get(key)
+        out.append(f"{name} {'-' if v is None else fmt.format(v).strip()}")
+    return "  ".join(out)
 
 
 def clip_files(folders: list[Path]) -> list[Path]:
@@ -191,6 +216,11 @@ def main() -> None:
     ap.add_argument("-j", "--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--json", type=Path, default=None, help="also write every clip's figures here")
     ap.add_argument(
+        "--robot-only",
+        action="store_true",
+        help="physicalize every take's body motion without its object (hands free) and print each take's balance trace",
+    )
+    ap.add_argument(
         "--sensitivity",
         action="store_true",
         help="also run every take with its objects' mass and frictions at the low and at the high end of their ranges",
@@ -198,7 +228,9 @@ def main() -> None:
     args = ap.parse_args()
     files = clip_files(args.folders)
     t0 = time.perf_counter()
-    rows = map_ordered(run_clip, files, jobs=args.jobs, desc="real clips")
+    if args.robot_only and args.sensitivity:
+        ap.error("--robot-only and --sensitivity: the physics ranges are the objects'; choose one")
+    rows = map_ordered(partial(run_clip, robot_only=args.robot_only), files, jobs=args.jobs, desc="real clips")
     print(
         f"{'clip':28s}{'object':12s}{'kind':11s}{'rise':>6s}{'trav':>6s}{'s':>6s}{'rt/core':>9s}{'opp':>12s}"
         "  verdict: reason"
@@ -209,6 +241,8 @@ def main() -> None:
         shape = "".join(f"{r[k]:6.2f}" if k in r else f"{'-':>6s}" for k in ("rise_m", "travel_m"))
         head = f"{r['clip']:28s}{r['object']:12s}{r['kind']:11s}{shape}{r.get('seconds', 0):6.1f}{rt:9.2f}{opp:>12s}"
         print(f"{head}  {verdict_line(r)}")
+        if args.robot_only:
+            print(f"{'':28s}{trace_line(r)}")
     for line in summary(rows):
         print(line)
     if args.sensitivity:

@@ -12,9 +12,9 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-import mujoco
 import numpy as np
 
+from physicalize.balance import balance_figures, simulated_com
 from physicalize.feasibility import (
     grasp_feasibility,
     grasp_opposition,
@@ -77,6 +77,15 @@ def load_residual(path: str, digest: str):
 
         _RESIDUALS[(path, digest)] = ResidualPolicy.load(path)
     return _RESIDUALS[(path, digest)]
+
+
+def robot_alone(clip: RobotClip) -> RobotClip:
+    """The clip's body motion with no object: no object track, no robot-object contact label (hands free, the
+    reference otherwise the same), marked ``provenance["robot_alone"]``. Whether a take's walk holds on its own
+    is measured on this (``bench/bench_physicalize_real.py --robot-only``), to the same bars less the object's."""
+    return replace(
+        clip, objects=(), contact_links=(), contacts=None, provenance={**clip.provenance, "robot_alone": True}
+    )
 
 
 def first_contact_s(clip: RobotClip) -> float | None:
@@ -207,7 +216,9 @@ def physicalize_clip(
             scene, ref, controller, qpos0, qvel0, contact_links=clip.contact_links, perturb=perturb, residual=residual
         )
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
-        tried.append((index, roll, _figures(scene, roll, clip, objects, qpos0, qvel0, perturb, ref_figures)))
+        figures = _figures(scene, roll, clip, objects, qpos0, qvel0, perturb, ref_figures)
+        figures.update(balance_figures(scene.model, ref, roll, zmp, config.touch_force))
+        tried.append((index, roll, figures))
         if tried[-1][2]["valid"]:
             break
     kept, roll, figures = tried[-1] if tried[-1][2]["valid"] else tried[0]
@@ -265,7 +276,7 @@ def com_series(clip: RobotClip, scene, ref, zmp, roll: Rollout) -> dict:
         "reference": ref.com[:T],
         "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T],
         "zmp_planned": None if zmp is None else zmp[:T],
-        "simulated": _sim_com(scene.model, roll.qpos),
+        "simulated": simulated_com(scene.model, roll.qpos),
         "pelvis_ref": clip.qpos[:T, 2],
         "pelvis_sim": roll.qpos[:, 2],
         "support": _support_box(ref)[:T],
@@ -276,14 +287,3 @@ def _support_box(ref) -> np.ndarray:
     """(T, 2, 2) per frame the [min, max] x and y of the stance feet's sole corners (the support region's bounds)."""
     corners = np.where(ref.stance[:, :, None, None], ref.corners[..., :2], np.nan).reshape(ref.frames, -1, 2)
     return np.stack([np.nanmin(corners, axis=1), np.nanmax(corners, axis=1)], axis=1)
-
-
-def _sim_com(model, qpos: np.ndarray) -> np.ndarray:
-    d = mujoco.MjData(model)
-    out = np.zeros((len(qpos), 3))
-    for t, q in enumerate(qpos):
-        d.qpos[:] = q
-        mujoco.mj_kinematics(model, d)
-        mujoco.mj_comPos(model, d)
-        out[t] = d.subtree_com[model.body("pelvis").id]
-    return out

@@ -47,6 +47,8 @@ class Rollout:
     seconds: float
     final_qpos: np.ndarray  # state after the last action (for the replay check)
     final_qvel: np.ndarray
+    support: np.ndarray | None = None  # (T, 2) bool: the feet the controller held in support (after stepping)
+    landing_shift: np.ndarray | None = None  # (T, 2, 2): each foot's capture-point landing shift [m]
 
     @property
     def frames(self) -> int:
@@ -101,7 +103,19 @@ def simulate(
     object_geoms = {g for g in range(m.ngeom) if m.geom_bodyid[g] in set(scene.object_body_id.values())}
     T = ref.frames
     rec = {
-        k: [] for k in ("qpos", "qvel", "action", "torque", "foot_force", "contact", "penetration", "external_force")
+        k: []
+        for k in (
+            "qpos",
+            "qvel",
+            "action",
+            "torque",
+            "foot_force",
+            "contact",
+            "penetration",
+            "external_force",
+            "support",
+            "landing_shift",
+        )
     }
     fails, fell_at = 0, None
     t0 = time.perf_counter()
@@ -113,6 +127,8 @@ def simulate(
         rec["contact"].append(_link_contacts(m, d, link_geoms, object_geoms))
         sol = controller.solve(d, ref.target(t))
         fails += not sol.ok
+        rec["support"].append(sol.stance if sol.stance is not None else ref.stance[t])
+        rec["landing_shift"].append(sol.landing_shift if sol.landing_shift is not None else np.zeros((2, 2)))
         action = sol.action if residual is None else residual(d, ref, t, sol.action)
         d.ctrl[:] = action
         tau, pen, ext = np.zeros(NUM_JOINTS), 0.0, 0.0

@@ -51,3 +51,5 @@ class Solution:
     tau: np.ndarray  # (29,)
     action: np.ndarray  # (29,) joint position targets
     ok: bool
+    stance: tuple[bool, bool] | None = None  # the support the QP used (the schedule after the stepping logic)
+    landing_shift: np.ndarray | None = None  # (2, 2) each foot's capture-point shift of its last landing [m]

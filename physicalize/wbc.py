@@ -213,7 +213,8 @@ class WholeBodyController:
         self._remember_press(loop, x, nv + nf_robot, ok)
         qdd, f = x[:nv], x[nv : nv + nf_robot]
         tau = np.clip(Tq @ x + ta, -self.effort, self.effort)
-        return Solution(qdd, f.reshape(-1, 3), tau, self.action(d, qdd, tau), ok)
+        shift = self.stepping.landing_shift.copy()
+        return Solution(qdd, f.reshape(-1, 3), tau, self.action(d, qdd, tau), ok, target.stance, shift)
 
     def _support(self, d, target: Target, com: ComState) -> tuple[Target, np.ndarray, list[SupportPoint]]:
         """``(target, tau_ext, seats)``: the target with the stepping logic's support and footholds (unless
