@@ -8,7 +8,8 @@ BeyondMimic (``HybridRobotics/whole_body_tracking``, ``scripts/csv_to_npz.py``) 
 give in that same articulation, never by name (the file has no name keys). PhysX orders an articulation's links
 **breadth-first** from the root (level by level; within a level by parent, then in the description's child order)
 and its joints as their child links. On the G1 (30 links, 29 revolute joints) that is :data:`ISAACLAB_BODY_NAMES`
-and :data:`ISAACLAB_JOINT_NAMES` -- the order a BeyondMimic policy's exported ``joint_names`` list too.
+and :data:`ISAACLAB_JOINT_NAMES` (:mod:`pipeline.isaaclab_order`) -- the order a BeyondMimic policy's exported
+``joint_names`` list too.
 
 mjlab (MuJoCo) orders the same bodies depth-first (:data:`motion_export.bodies.ENTITY_BODY_NAMES`): only 2 of the 29
 joint columns coincide, so an mjlab file read by BeyondMimic drives the wrong joints. Both tables are kept literally
@@ -24,39 +25,8 @@ import mujoco
 import numpy as np
 
 from motion_export.bodies import ENTITY_BODY_NAMES, ENTITY_JOINT_NAMES
+from pipeline.isaaclab_order import ISAACLAB_BODY_NAMES, ISAACLAB_JOINT_NAMES
 from pipeline.robot import g1_model
-
-#: Isaac Lab (PhysX) joint order of the G1: breadth-first over the kinematic tree, left before right before waist
-ISAACLAB_JOINT_NAMES: tuple[str, ...] = tuple(
-    f"{n}_joint"
-    for n in (
-        "left_hip_pitch", "right_hip_pitch", "waist_yaw",
-        "left_hip_roll", "right_hip_roll", "waist_roll",
-        "left_hip_yaw", "right_hip_yaw", "waist_pitch",
-        "left_knee", "right_knee", "left_shoulder_pitch", "right_shoulder_pitch",
-        "left_ankle_pitch", "right_ankle_pitch", "left_shoulder_roll", "right_shoulder_roll",
-        "left_ankle_roll", "right_ankle_roll", "left_shoulder_yaw", "right_shoulder_yaw",
-        "left_elbow", "right_elbow",
-        "left_wrist_roll", "right_wrist_roll",
-        "left_wrist_pitch", "right_wrist_pitch",
-        "left_wrist_yaw", "right_wrist_yaw",
-    )
-)  # fmt: skip
-
-#: Isaac Lab (PhysX) body order of the G1: the pelvis (root), then each joint's child link in joint order
-ISAACLAB_BODY_NAMES: tuple[str, ...] = (
-    "pelvis",
-    "left_hip_pitch_link", "right_hip_pitch_link", "waist_yaw_link",
-    "left_hip_roll_link", "right_hip_roll_link", "waist_roll_link",
-    "left_hip_yaw_link", "right_hip_yaw_link", "torso_link",
-    "left_knee_link", "right_knee_link", "left_shoulder_pitch_link", "right_shoulder_pitch_link",
-    "left_ankle_pitch_link", "right_ankle_pitch_link", "left_shoulder_roll_link", "right_shoulder_roll_link",
-    "left_ankle_roll_link", "right_ankle_roll_link", "left_shoulder_yaw_link", "right_shoulder_yaw_link",
-    "left_elbow_link", "right_elbow_link",
-    "left_wrist_roll_link", "right_wrist_roll_link",
-    "left_wrist_pitch_link", "right_wrist_pitch_link",
-    "left_wrist_yaw_link", "right_wrist_yaw_link",
-)  # fmt: skip
 
 #: column of each :data:`ISAACLAB_JOINT_NAMES` joint among the entity's (mjlab) joints
 ISAACLAB_JOINT_INDEX = np.array([ENTITY_JOINT_NAMES.index(n) for n in ISAACLAB_JOINT_NAMES])

@@ -4,9 +4,9 @@ The MJCF and meshes come from the ``mjlab`` wheel (Apache-2.0), located through 
 installed package, never copied into this repository. The XML carries no actuators;
 :mod:`pipeline.scene` adds them from an :class:`ActuatorProfile`.
 
-Joint order is mjlab's (also the order of the ``g1.xml`` joints and of BeyondMimic /
-OmniRetarget motion files): :data:`G1_JOINT_NAMES`. ``qpos`` = root position (3),
-root quaternion wxyz (4), then those 29 joints.
+Joint order is mjlab's (also the order of the ``g1.xml`` joints and of mjlab / OmniRetarget motion files; BeyondMimic's
+are in Isaac Lab's breadth-first order, :mod:`pipeline.isaaclab_order`): :data:`G1_JOINT_NAMES`. ``qpos`` = root
+position (3), root quaternion wxyz (4), then those 29 joints.
 
 Two actuator profiles, both position-controlled (``tau = kp (q* - q) - kd qd``, clipped
 to the effort limit):

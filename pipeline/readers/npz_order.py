@@ -17,6 +17,7 @@ import mujoco
 import numpy as np
 
 from pipeline.errors import InputError
+from pipeline.isaaclab_order import ISAACLAB_BODY_NAMES, ISAACLAB_JOINT_NAMES
 from pipeline.robot import G1_JOINT_NAMES, g1_model
 
 MATCH_TOL_M = 0.01  # m: largest body position error for an order to match
@@ -24,8 +25,6 @@ CHECK_FRAMES = 8
 
 
 def _orders() -> dict[str, tuple[tuple[str, ...], tuple[str, ...]]]:
-    from motion_export.isaaclab import ISAACLAB_BODY_NAMES, ISAACLAB_JOINT_NAMES
-
     m = g1_model()
     mjlab_bodies = tuple(m.body(i).name for i in range(1, m.nbody))
     return {
