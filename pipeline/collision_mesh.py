@@ -38,14 +38,20 @@ def cache_dir() -> Path:
 def load_mesh(path: str) -> trimesh.Trimesh:
     """The mesh file as one triangle mesh (scenes concatenated); missing or empty -> InputError."""
     p = Path(path)
+    if p.is_dir():
+        raise InputError(p, "mesh", "is a folder; give the object's mesh file (.obj, .stl, .ply)")
     if not p.is_file():
         raise InputError(p, "mesh", "object mesh file not found")
     try:
         mesh = trimesh.load(p, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise InputError(p, "mesh", f"cannot be read as a mesh ({type(exc).__name__}: {exc})") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0 or len(mesh.vertices) < 4:
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise InputError(p, "mesh", "object mesh is empty (no faces)")
+    if len(mesh.vertices) < 4:
+        raise InputError(
+            p, "mesh", f"has {len(mesh.vertices)} vertices: too few to enclose a volume (an object needs at least 4)"
+        )
     if not np.isfinite(mesh.vertices).all():
         raise InputError(p, "mesh vertices", "contain NaN or infinite values")
     return mesh

@@ -133,6 +133,12 @@ def test_missing_and_empty_mesh(tmp_path: Path):
     empty.write_text("# no vertices\n")
     with pytest.raises(InputError, match=r"empty\.obj: mesh: .*(empty|cannot be read)"):
         build_scene([SceneObject("m", MeshGeometry(str(empty)))])
+    triangle = tmp_path / "triangle.obj"
+    triangle.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(InputError, match=r"triangle\.obj: mesh: has 3 vertices: too few to enclose a volume"):
+        build_scene([SceneObject("m", MeshGeometry(str(triangle)))])
+    with pytest.raises(InputError, match=r": mesh: is a folder; give the object's mesh file"):
+        build_scene([SceneObject("m", MeshGeometry(str(tmp_path)))])
 
 
 @needs_shared
