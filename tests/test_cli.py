@@ -104,7 +104,12 @@ def test_default_chain_retarget_physicalize_features(tmp_path, monkeypatch, caps
 
 
 def _tree(folder):
-    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(folder.rglob("*"))}
+    """Every file's size and mtime, every folder by name (a writer's lock comes and goes in a dataset's folder: the
+    folder's own mtime moves, no file does)."""
+    return {
+        str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) if p.is_file() else "folder"
+        for p in sorted(folder.rglob("*"))
+    }
 
 
 def test_retarget_rerun_on_the_same_input_does_nothing(tmp_path, monkeypatch, capsys):

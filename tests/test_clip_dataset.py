@@ -21,7 +21,7 @@ from pipeline.dataset.objects import objects_note
 from pipeline.errors import InputError
 from pipeline.geometry import Chair, Primitive
 from pipeline.kinematics import qpos_difference, qvel_from_qpos
-from pipeline.robot import QPOS_NAMES
+from pipeline.robot import G1_JOINT_NAMES, QPOS_NAMES, g1_model
 from pipeline.rotations import wxyz_from_rotation
 
 LeRobotDataset = pytest.importorskip("lerobot.datasets.lerobot_dataset").LeRobotDataset
@@ -34,7 +34,8 @@ def _qpos(T, seed):
     q = np.zeros((T, 36))
     q[:, :3] = [0.1, 0.2, 0.78] + 0.01 * np.cumsum(rng.normal(size=(T, 3)), axis=0)
     q[:, 3:7] = wxyz_from_rotation(Rotation.from_rotvec(0.3 * np.cumsum(rng.normal(size=(T, 3)), axis=0) / np.sqrt(T)))
-    q[:, 7:] = 0.2 * rng.normal(size=(T, 29))
+    lo, hi = g1_model().jnt_range[[g1_model().joint(j).id for j in G1_JOINT_NAMES]].T
+    q[:, 7:] = np.clip(0.2 * rng.normal(size=(T, 29)), lo, hi)  # a dataset's joints lie within their range
     return q
 
 

@@ -162,10 +162,14 @@ def test_nothing_to_do_when_physicalize_kept_no_clip(tmp_path, monkeypatch, caps
 def test_an_object_with_zero_scale_is_a_one_line_error(tmp_path, monkeypatch, capsys):
     import pandas as pd
 
+    from pipeline.dataset.checksums import read_checksums, write_checksums
+
     monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path))
     root = _physicalized([_clip(5, "a")])
     meta = root / "meta" / "lessmimic_episodes.jsonl"
     meta.write_text(meta.read_text().replace('"scale": [1.0, 1.0, 1.0]', '"scale": [0.0, 1.0, 1.0]'))
+    # as a writer would have written it (its checksums agree): the geometry, not the corruption, is the error
+    write_checksums(root, read_checksums(root)["upstream"])
     assert '"scale": [0.0' in meta.read_text() and pd.read_json(meta, lines=True).shape[0] == 1
     assert main(["features", "--name", "feat"]) == 2
     err = capsys.readouterr().err
