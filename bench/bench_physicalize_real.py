@@ -49,6 +49,7 @@ torch.set_num_threads(1)
 import numpy as np  # noqa: E402
 
 from physicalize.clip import physicalize_clip, robot_alone  # noqa: E402
+from physicalize.search.beam import SearchConfig  # noqa: E402
 from pipeline.materials import object_physics_for  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
 from pipeline.stage.executor import map_ordered  # noqa: E402
@@ -56,6 +57,7 @@ from pipeline.take import KINDS, held_frames, object_field, take_kind  # noqa: E
 from retarget.clip import retarget_clip  # noqa: E402
 from retarget.grip import g1_opposition  # noqa: E402
 
+SEARCH = SearchConfig()
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "mocap"
 DEFAULT_FOLDERS = [SHARED / "interact", SHARED / "omomo", SHARED / "intermimic"]
 
@@ -92,9 +94,10 @@ def with_physics(human, end: str):
     return replace(human, objects=tuple(objects))
 
 
-def run_clip(path: Path, end: str = "nominal", robot_only: bool = False) -> dict:
+def run_clip(path: Path, end: str = "nominal", robot_only: bool = False, search: SearchConfig | None = SEARCH) -> dict:
     """Retarget and physicalize one clip file, its objects' physics at ``end`` of their ranges (``robot_only``: its
-    body motion alone, :func:`physicalize.clip.robot_alone`); its figures, verdict and timings."""
+    body motion alone, :func:`physicalize.clip.robot_alone`), with the ``search`` where the teacher falls (None: no
+    search); its figures, verdict (and the verdict before the search, ``verdict_before``) and timings."""
     row = {"clip": path.name, "folder": path.parent.name, "object": object_kind(path), "kind": "unread"}
     stage, c0 = "retarget_cpu_s", time.process_time()
     try:
@@ -111,13 +114,17 @@ def run_clip(path: Path, end: str = "nominal", robot_only: bool = False) -> dict
         row["opposition_human"] = robot.provenance.get("human_hand_opposition")
         row["opposition_g1"] = g1_hand_opposition(human, robot)
         stage, c0 = "physicalize_cpu_s", time.process_time()
-        _, roll, figures, _ = physicalize_clip(robot_alone(robot) if robot_only else robot)
+        _, roll, figures, _ = physicalize_clip(robot_alone(robot) if robot_only else robot, search=search)
         row["physicalize_cpu_s"] = time.process_time() - c0
         row["seconds"] = robot.frames / robot.fps
     except Exception as exc:  # noqa: BLE001 - a clip that raises is a row of the table, not the end of the bench
         row.setdefault(stage, time.process_time() - c0)  # the CPU it spent counts against the yield
         figures = {"valid": False, "reason": f"error: {type(exc).__name__}: {exc}", "failure": "error"}
     row.update(figures)
+    searched = figures.get("search")
+    row["searched"] = searched is not None
+    row["search_cpu_s"] = searched["cpu_s"] if searched else 0.0
+    row["verdict_before"] = f"failed: {searched['failure_before']}" if searched else None
     row["verdict"] = (
         "valid"
         if figures["valid"]
@@ -225,12 +232,22 @@ def main() -> None:
         action="store_true",
         help="also run every take with its objects' mass and frictions at the low and at the high end of their ranges",
     )
+    ap.add_argument(
+        "--search-budget",
+        type=float,
+        default=SEARCH.children_per_s,
+        help=f"search children per second of motion where the teacher falls (0: none; {SEARCH.children_per_s:g})",
+    )
     args = ap.parse_args()
     files = clip_files(args.folders)
     t0 = time.perf_counter()
     if args.robot_only and args.sensitivity:
         ap.error("--robot-only and --sensitivity: the physics ranges are the objects'; choose one")
-    rows = map_ordered(partial(run_clip, robot_only=args.robot_only), files, jobs=args.jobs, desc="real clips")
+    if not args.search_budget >= 0:
+        ap.error(f"--search-budget: must be >= 0 (0: no search), got {args.search_budget:g}")
+    search = replace(SEARCH, children_per_s=args.search_budget) if args.search_budget > 0 else None
+    run = partial(run_clip, robot_only=args.robot_only, search=search)
+    rows = map_ordered(run, files, jobs=args.jobs, desc="real clips")
     print(
         f"{'clip':28s}{'object':12s}{'kind':11s}{'rise':>6s}{'trav':>6s}{'s':>6s}{'rt/core':>9s}{'opp':>12s}"
         "  verdict: reason"
@@ -241,15 +258,32 @@ def main() -> None:
         shape = "".join(f"{r[k]:6.2f}" if k in r else f"{'-':>6s}" for k in ("rise_m", "travel_m"))
         head = f"{r['clip']:28s}{r['object']:12s}{r['kind']:11s}{shape}{r.get('seconds', 0):6.1f}{rt:9.2f}{opp:>12s}"
         print(f"{head}  {verdict_line(r)}")
+        if r["searched"]:
+            s = r["search"]
+            print(
+                f"{'':28s}searched: {s['children']} children in {s['attempts']} attempt(s), {s['cpu_s']:.1f} CPU-s "
+                f"({s['cpu_s'] / max(r['seconds'], 1e-9):.1f} per second of motion); before: {r['verdict_before']}"
+            )
         if args.robot_only:
             print(f"{'':28s}{trace_line(r)}")
+    before = [{**r, "valid": False, "verdict": r["verdict_before"]} if r["searched"] else r for r in rows]
+    print("before the search: " + summary(before)[0].removeprefix("all").strip())
     for line in summary(rows):
         print(line)
+    searched = [r for r in rows if r["searched"]]
+    if searched:
+        per_s = [r["search_cpu_s"] / max(r["seconds"], 1e-9) for r in searched]
+        print(
+            f"search: {len(searched)} takes searched, {sum(r['valid'] for r in searched)} made valid; "
+            f"{np.mean(per_s):.1f} CPU-s per second of motion (max {max(per_s):.1f}), the take's whole physicalize "
+            f"pass {np.mean([r['physicalize_cpu_s'] / r['seconds'] for r in searched]):.1f} (max "
+            f"{max(r['physicalize_cpu_s'] / r['seconds'] for r in searched):.1f})"
+        )
     if args.sensitivity:
         print("sensitivity (pipeline.materials: every take's mass, hand and floor friction at one end of its ranges):")
         print(f"  {'nominal':8s}" + summary(rows)[0].removeprefix("all").strip())
         for end in ("low", "high"):
-            at_end = map_ordered(partial(run_clip, end=end), files, jobs=args.jobs, desc=f"real clips, {end}")
+            at_end = map_ordered(partial(run, end=end), files, jobs=args.jobs, desc=f"real clips, {end}")
             print(f"  {end:8s}" + summary(at_end)[0].removeprefix("all").strip())
             rows += [{**r, "physics_end": end} for r in at_end]
     print(f"({len(rows)} clips in {time.perf_counter() - t0:.0f} s wall on {args.jobs} worker processes)")

@@ -135,6 +135,7 @@ def _cmd_physicalize(a: argparse.Namespace) -> int:
         keep_invalid=a.keep_invalid,
         jobs=a.jobs,
         executor=a.executor,
+        search_budget=a.search_budget,
     )
     if report.get("up_to_date"):
         print(up_to_date_line("physicalize", a.name, "physicalized"))
@@ -280,6 +281,13 @@ def _add_physicalize(sub) -> None:
         "--keep-invalid",
         action="store_true",
         help="also write clips that fail validation (they are always in report.json)",
+    )
+    p.add_argument(
+        "--search-budget",
+        type=float,
+        default=None,
+        help="children per second of motion of the search with the QP in the loop where the teacher's rollout falls "
+        "(physicalize/search/; 0: no search; default 220, at most ~18 CPU-s per second of motion)",
     )
     p.set_defaults(func=_cmd_physicalize, writes="name")
 

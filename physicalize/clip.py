@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import time
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,8 @@ from physicalize.feasibility import (
 from physicalize.payload import capped, held_objects, load_scale
 from physicalize.problem import object_qpos, tracking_problem
 from physicalize.rollout import Rollout, initial_state, replay, simulate
+from physicalize.search import beam
+from physicalize.search.beam import SearchConfig
 from physicalize.start import clean_start, prefix_frames
 from physicalize.static_torque import static_torque_figures
 from physicalize.validate import failure_class, validate
@@ -161,6 +164,41 @@ def _figures(
     return figures
 
 
+def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, zmp, tried, gains, config: SearchConfig):
+    """``(gain set, rollout, figures)`` of the search (:mod:`physicalize.search.beam`) from the gain set whose rollout
+    fell last: up to ``config.attempts`` searches (seeds ``config.seed``, ``+ 1``, ...) sharing the budget
+    (:attr:`~physicalize.search.beam.SearchConfig.children_per_s`) until one's rollout is valid, else the last; its
+    figures carry ``search``: where it started, its segments, the children and CPU-seconds of every attempt, and the
+    verdict before and after. None when no tried rollout fell."""
+    fell = [(k, r, f) for k, r, f in tried if r.fell_at is not None]
+    if not fell:
+        return None
+    index, nominal, before = max(fell, key=lambda x: x[1].fell_at)
+    make = partial(WholeBodyController, scene.model, scene.profile, gains[index])
+    budget, spent, children = int(config.children_per_s * ref.frames / clip.fps), 0.0, 0
+    for attempt in range(config.attempts):
+        share, left = replace(config, seed=config.seed + attempt), budget - children
+        kw = {"contact_links": clip.contact_links, "objects": objects, "max_children": left}
+        found = beam.search(scene, ref, make, *state0, nominal, share, **kw)
+        spent, children = spent + found.cpu_s, children + found.children
+        figures = _figures(scene, found.rollout, clip, objects, *state0, None, ref_figures)
+        if figures["valid"] or children >= budget:
+            break
+    figures.update(balance_figures(scene.model, ref, found.rollout, zmp, gains[index].touch_force))
+    figures["search"] = {
+        "gain_set": index,
+        "start_s": found.start / clip.fps,
+        "segments": [seg.as_dict(clip.fps) for seg in found.segments],
+        "attempts": attempt + 1,
+        "children": children,
+        "cpu_s": spent,
+        "failure_before": before["failure"],
+        "failure_after": figures["failure"],
+        "reason_after": figures["reason"],
+    }
+    return index, found.rollout, figures
+
+
 def _rejected(figures: dict, rejected: str) -> dict:
     """The figures of a clip rejected before tracking (:func:`physicalize.feasibility.rejection`)."""
     why = rejection_reason(figures, rejected)
@@ -176,6 +214,7 @@ def physicalize_clip(
     teacher: str = "base",
     grasp: bool = True,
     gains: tuple[WBCConfig, ...] | None = None,
+    search: SearchConfig | None = SearchConfig(),
 ) -> tuple[RobotClip | None, Rollout | None, dict, dict]:
     """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
     ``reference`` (see :func:`physicalize.problem.tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`).
@@ -224,6 +263,14 @@ def physicalize_clip(
     kept, roll, figures = tried[-1] if tried[-1][2]["valid"] else tried[0]
     if not figures["valid"] and len(tried) > 1:
         figures["reason"] += "".join(f"; gain set {k}: {f['reason'].split(';')[0]}" for k, _, f in tried[1:])
+    if not figures["valid"] and search is not None and residual is None and perturb is None:
+        t0, cpu0 = time.perf_counter(), time.process_time()
+        found = _search(scene, ref, clip, objects, (qpos0, qvel0), ref_figures, zmp, tried, gains, search)
+        wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
+        if found is not None and found[2]["valid"]:
+            kept, roll, figures = found
+        elif found is not None:  # the search's best is invalid too: the tried rollout stays, with what was searched
+            figures = {**figures, "search": found[2]["search"]}
     figures["teacher_gains"], figures["teacher_attempts"] = kept, len(tried)
     figures["start_prefix_s"] = prefix_frames(clip) / clip.fps
     roll.seconds = wall

@@ -80,6 +80,124 @@ def _link_contacts(m, d, link_geoms: list[set[int]], object_geoms: set[int]) -> 
     return out
 
 
+RECORDED = (
+    "qpos",
+    "qvel",
+    "action",
+    "torque",
+    "foot_force",
+    "contact",
+    "penetration",
+    "external_force",
+    "support",
+    "landing_shift",
+)
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """A :class:`Tracker` at one control frame: MuJoCo's integration state (``mjSTATE_INTEGRATION``: restores
+    ``MjData`` exactly), the controller's own state, and how much had been recorded."""
+
+    t: int
+    physics: np.ndarray
+    controller: tuple
+    recorded: int
+    fails: int
+    fell_at: int | None
+
+
+class Tracker:
+    """Closed-loop tracking of a reference advanced one control frame at a time (:func:`simulate` runs it to the
+    end), whose state can be saved and restored exactly (:meth:`snapshot`, :meth:`restore`) and whose reference can be
+    swapped between frames (:attr:`ref`): the search (:mod:`physicalize.search`) tries several continuations from
+    one state. A restored tracker continues bit for bit as the original did from that frame."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        ref: Reference,
+        controller: WholeBodyController,
+        qpos0: np.ndarray,
+        qvel0: np.ndarray,
+        *,
+        contact_links: tuple[str, ...] = (),
+        perturb: Callable[[int, mujoco.MjData], None] | None = None,
+        residual: Callable[[mujoco.MjData, Reference, int, np.ndarray], np.ndarray] | None = None,
+    ):
+        m = self.model = scene.model
+        self.ref, self.controller, self.perturb, self.residual = ref, controller, perturb, residual
+        self.data = mujoco.MjData(m)
+        self.data.qpos[:], self.data.qvel[:] = qpos0, qvel0
+        self.robot, self.torso = ContactSets.of(m), m.body("torso_link").id
+        self.link_geoms = [set(link_collision_geoms(m, b)) for b in contact_links]
+        self.object_geoms = {g for g in range(m.ngeom) if m.geom_bodyid[g] in set(scene.object_body_id.values())}
+        self.rec: dict[str, list] = {k: [] for k in RECORDED}
+        self.t, self.fails, self.fell_at = 0, 0, None
+        self.started = time.perf_counter()
+
+    def step(self) -> None:
+        """Record frame ``t``, hold the controller's joint targets for :data:`SUBSTEPS` physics steps, test the fall."""
+        m, d, ref, rec, t = self.model, self.data, self.ref, self.rec, self.t
+        T = ref.frames
+        mujoco.mj_forward(m, d)
+        rec["qpos"].append(d.qpos.copy())
+        rec["qvel"].append(d.qvel.copy())
+        rec["foot_force"].append(foot_floor_forces(self.robot, d))
+        rec["contact"].append(_link_contacts(m, d, self.link_geoms, self.object_geoms))
+        sol = self.controller.solve(d, ref.target(t))
+        self.fails += not sol.ok
+        rec["support"].append(sol.stance if sol.stance is not None else ref.stance[min(t, T - 1)])
+        rec["landing_shift"].append(sol.landing_shift if sol.landing_shift is not None else np.zeros((2, 2)))
+        action = sol.action if self.residual is None else self.residual(d, ref, t, sol.action)
+        d.ctrl[:] = action
+        tau, pen, ext = np.zeros(NUM_JOINTS), 0.0, 0.0
+        for _ in range(SUBSTEPS):
+            if self.perturb is not None:
+                self.perturb(t, d)
+            ext = max(ext, float(np.abs(d.xfrc_applied).max()))
+            mujoco.mj_step(m, d)
+            tau += d.actuator_force / SUBSTEPS
+            if d.ncon:
+                pen = max(pen, float(-d.contact.dist[: d.ncon].min()))
+        rec["action"].append(action)
+        rec["torque"].append(tau)
+        rec["penetration"].append(max(pen, 0.0))
+        rec["external_force"].append(ext)
+        k = min(t + 1, T - 1)
+        if self.fell_at is None and fallen(d, ref.qpos[k, 2], self.torso, ref.torso_quat[k]):
+            self.fell_at = t + 1
+        self.t = t + 1
+
+    def run(self, until: int, stop_on_fall: bool = True) -> None:
+        """Step until frame ``until`` (at most the reference's end), or the fall."""
+        while self.t < min(until, self.ref.frames) and not (stop_on_fall and self.fell_at is not None):
+            self.step()
+
+    def snapshot(self) -> Snapshot:
+        state = np.zeros(mujoco.mj_stateSize(self.model, mujoco.mjtState.mjSTATE_INTEGRATION))
+        mujoco.mj_getState(self.model, self.data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
+        return Snapshot(self.t, state, self.controller.state(), len(self.rec["qpos"]), self.fails, self.fell_at)
+
+    def restore(self, snap: Snapshot) -> None:
+        mujoco.mj_setState(self.model, self.data, snap.physics, mujoco.mjtState.mjSTATE_INTEGRATION)
+        self.controller.set_state(snap.controller)
+        for v in self.rec.values():
+            del v[snap.recorded :]
+        self.t, self.fails, self.fell_at = snap.t, snap.fails, snap.fell_at
+
+    def rollout(self) -> Rollout:
+        """What was recorded, as a :class:`Rollout`."""
+        return Rollout(
+            **{k: np.asarray(v) for k, v in self.rec.items()},
+            qp_failures=self.fails,
+            fell_at=self.fell_at,
+            seconds=time.perf_counter() - self.started,
+            final_qpos=self.data.qpos.copy(),
+            final_qvel=self.data.qvel.copy(),
+        )
+
+
 def simulate(
     scene: Scene,
     ref: Reference,
@@ -95,68 +213,11 @@ def simulate(
     """Track ``ref`` from ``(qpos0, qvel0)``; ``perturb(t, data)`` may set ``xfrc_applied`` (tests only).
     With a ``residual(data, ref, t, base_action)`` (:class:`physicalize.residual.ResidualPolicy`) the
     applied (and recorded) targets are its output, else the controller's."""
-    m = scene.model
-    d = mujoco.MjData(m)
-    d.qpos[:], d.qvel[:] = qpos0, qvel0
-    robot, torso = ContactSets.of(m), m.body("torso_link").id
-    link_geoms = [set(link_collision_geoms(m, b)) for b in contact_links]
-    object_geoms = {g for g in range(m.ngeom) if m.geom_bodyid[g] in set(scene.object_body_id.values())}
-    T = ref.frames
-    rec = {
-        k: []
-        for k in (
-            "qpos",
-            "qvel",
-            "action",
-            "torque",
-            "foot_force",
-            "contact",
-            "penetration",
-            "external_force",
-            "support",
-            "landing_shift",
-        )
-    }
-    fails, fell_at = 0, None
-    t0 = time.perf_counter()
-    for t in range(T):
-        mujoco.mj_forward(m, d)
-        rec["qpos"].append(d.qpos.copy())
-        rec["qvel"].append(d.qvel.copy())
-        rec["foot_force"].append(foot_floor_forces(robot, d))
-        rec["contact"].append(_link_contacts(m, d, link_geoms, object_geoms))
-        sol = controller.solve(d, ref.target(t))
-        fails += not sol.ok
-        rec["support"].append(sol.stance if sol.stance is not None else ref.stance[t])
-        rec["landing_shift"].append(sol.landing_shift if sol.landing_shift is not None else np.zeros((2, 2)))
-        action = sol.action if residual is None else residual(d, ref, t, sol.action)
-        d.ctrl[:] = action
-        tau, pen, ext = np.zeros(NUM_JOINTS), 0.0, 0.0
-        for _ in range(SUBSTEPS):
-            if perturb is not None:
-                perturb(t, d)
-            ext = max(ext, float(np.abs(d.xfrc_applied).max()))
-            mujoco.mj_step(m, d)
-            tau += d.actuator_force / SUBSTEPS
-            if d.ncon:
-                pen = max(pen, float(-d.contact.dist[: d.ncon].min()))
-        rec["action"].append(action)
-        rec["torque"].append(tau)
-        rec["penetration"].append(max(pen, 0.0))
-        rec["external_force"].append(ext)
-        if fell_at is None and fallen(d, ref.qpos[min(t + 1, T - 1), 2], torso, ref.torso_quat[min(t + 1, T - 1)]):
-            fell_at = t + 1
-            if stop_on_fall:
-                break
-    arrays = {k: np.asarray(v) for k, v in rec.items()}
-    return Rollout(
-        **arrays,
-        qp_failures=fails,
-        fell_at=fell_at,
-        seconds=time.perf_counter() - t0,
-        final_qpos=d.qpos.copy(),
-        final_qvel=d.qvel.copy(),
+    tracker = Tracker(
+        scene, ref, controller, qpos0, qvel0, contact_links=contact_links, perturb=perturb, residual=residual
     )
+    tracker.run(ref.frames, stop_on_fall)
+    return tracker.rollout()
 
 
 def replay(

@@ -11,9 +11,10 @@ on the same retargeted dataset with the same options is up to date (:func:`run_f
 
 from __future__ import annotations
 
+import math
 import time
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, replace
 from functools import partial
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from physicalize.clip import TeacherSpec, load_residual, parse_teacher, physical
 from physicalize.kinematic import kinematic_clip
 from physicalize.plot import plot_physicalized
 from physicalize.rollout import Rollout
+from physicalize.search.beam import SearchConfig
 from physicalize.start import prefix_frames
 from physicalize.validate import summarise
 from pipeline.clip import PhysicalizedClip, RobotClip
@@ -53,10 +55,13 @@ class ClipResult:
     com: dict  # reference / planned / simulated CoM series for the plot
 
 
-def physicalize_one(item: tuple[int, RobotClip], teacher: str = "base", profile: str = "mjlab") -> ClipResult:
-    """:func:`physicalize_clip` of the ``(index, clip)`` item; a clip that raises is invalid, with its error."""
+def physicalize_one(
+    item: tuple[int, RobotClip], teacher: str = "base", profile: str = "mjlab", search: SearchConfig | None = None
+) -> ClipResult:
+    """:func:`physicalize_clip` of the ``(index, clip)`` item with the ``search`` where the teacher falls (None: no
+    search); a clip that raises is invalid, with its error."""
     index, clip = item
-    run = kinematic_clip if teacher == "kinematic" else partial(physicalize_clip, teacher=teacher)
+    run = kinematic_clip if teacher == "kinematic" else partial(physicalize_clip, teacher=teacher, search=search)
     try:
         robot, roll, figures, com = run(clip, profile=profile)
     except Exception as exc:  # noqa: BLE001 - a clip that cannot be simulated is reported, the batch goes on
@@ -108,9 +113,9 @@ def _physicalized(r: ClipResult) -> PhysicalizedClip:
     )
 
 
-def run_fingerprint(src: Path, spec: TeacherSpec, profile: str, keep_invalid: bool) -> str:
+def run_fingerprint(src: Path, spec: TeacherSpec, profile: str, keep_invalid: bool, search: SearchConfig | None) -> str:
     """What a run's output depends on (:mod:`pipeline.stage.state`): the retargeted dataset at ``src``,
-    the teacher (with its checkpoint's digest, not its path), the actuator profile and ``keep_invalid``."""
+    the teacher (with its checkpoint's digest, not its path), the actuator profile, ``keep_invalid`` and the search."""
     return fingerprint(
         stage="physicalized",
         retargeted=dataset_fingerprint(src),
@@ -118,7 +123,18 @@ def run_fingerprint(src: Path, spec: TeacherSpec, profile: str, keep_invalid: bo
         teacher_sha256=spec.digest,
         actuator_profile=profile,
         keep_invalid=keep_invalid,
+        search=None if search is None else asdict(search),
     )
+
+
+def search_config(budget: float | None) -> SearchConfig | None:
+    """The search of ``--search-budget`` (children per second of motion; None: the default, 0: no search); a budget
+    below 0 or not finite is an :class:`InputError`."""
+    if budget is None:
+        return SearchConfig()
+    if not math.isfinite(budget) or budget < 0:
+        raise InputError(budget, "--search-budget", "must be >= 0 children per second of motion (0: no search)")
+    return replace(SearchConfig(), children_per_s=budget) if budget > 0 else None
 
 
 def _checked_teacher(teacher: str, profile: str) -> tuple[TeacherSpec, ActuatorProfile]:
@@ -264,23 +280,26 @@ def run_stage(
     keep_invalid: bool = False,
     jobs: int = 1,
     executor: str = "local",
+    search_budget: float | None = None,
 ) -> dict:
-    """``lessmimic physicalize``: simulate every retargeted clip, write the dataset, report and logs. Without
+    """``lessmimic physicalize``: simulate every retargeted clip (the search of ``search_budget``,
+    :func:`search_config`, where the teacher falls), write the dataset, report and logs. Without
     ``overwrite``, a finished run on the same retargeted dataset with the same options (:func:`run_fingerprint`)
     is up to date: its report comes back with ``"up_to_date": True`` and nothing is done."""
     check_executor(executor, jobs)
     spec, prof = _checked_teacher(teacher, profile)
+    search = search_config(search_budget)
     src = stage_dir(name, "retargeted")
     if not (src / "meta" / "info.json").is_file():
         why = "no retargeted dataset here: run `lessmimic retarget --name NAME` first"
         raise InputError(src, "meta/info.json", why)
-    run = StageRun(stage_dir(name, "physicalized"), run_fingerprint(src, spec, prof.name, keep_invalid))
+    run = StageRun(stage_dir(name, "physicalized"), run_fingerprint(src, spec, prof.name, keep_invalid, search))
     if not overwrite and (done := run.finished()) is not None:
         return {**done, "up_to_date": True}
     run.begin(overwrite)
     t0 = time.perf_counter()
     clips = episodes_to_robot_clips(src)
-    simulate = partial(physicalize_one, teacher=teacher, profile=prof.name)
+    simulate = partial(physicalize_one, teacher=teacher, profile=prof.name, search=search)
     results = run.map(simulate, list(enumerate(clips)), key=_clip_key, jobs=jobs, executor=executor, desc="physicalize")
     kept = [r for r in results if r.robot is not None and (r.figures["valid"] or keep_invalid)]
     report = _report(results, clips, spec, teacher, prof, keep_invalid, len(kept))

@@ -128,6 +128,14 @@ class WholeBodyController:
         self.stepping = Stepping(CONTROL_DT)  # capture-point shift of each foot's last landing (controller state)
         self._press = np.zeros(2)  # each holding hand's goal pressed into the object (the contact force loop)
 
+    def state(self) -> tuple:
+        """The controller's own state between control steps (the stepping's landing shifts, the hands' press): with
+        :meth:`set_state`, a rollout restored to a frame continues exactly (:class:`physicalize.rollout.Tracker`)."""
+        return self.stepping.landing_shift.copy(), self._press.copy()
+
+    def set_state(self, state: tuple) -> None:
+        self.stepping.landing_shift, self._press = state[0].copy(), state[1].copy()
+
     # --- kinematics helpers ---------------------------------------------------------------------
     def _jac(self, d, body: int, point: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(Jp, Jr, Jdot_p qd, Jdot_r qd) of a point on ``body`` (robot columns only)."""

@@ -1,0 +1,191 @@
+"""Beam search over the guided reference's segments (:mod:`physicalize.search.guide`), with the QP teacher in the
+loop, where the teacher's rollout falls.
+
+From :attr:`SearchConfig.start_before_s` before the nominal rollout's drift onset (its pelvis 5 cm off the
+reference, :mod:`physicalize.balance`), segment by segment of :attr:`SearchConfig.segment_s`:
+
+* every elite of the beam (a snapshot of the tracker at the segment's start and the segments chosen so far,
+  :class:`physicalize.rollout.Tracker`) has :attr:`SearchConfig.children` children: the first with no offset, the
+  others with offsets drawn from ``N(0, sigma)`` (CoM and swing foot, per axis) by a generator seeded with
+  :attr:`SearchConfig.seed`;
+* each child is simulated over its segment (snapshot at its end) and a lookahead of
+  :attr:`SearchConfig.lookahead_s`, and scored by :func:`cost`;
+* the :attr:`SearchConfig.beam` cheapest children are the next elites.
+
+Then the best elite's segments are re-simulated from frame 0 in a fresh tracker (the same arithmetic, so the same
+rollout), to be validated as every rollout is. The search stops early when its children reach ``max_children``
+(:attr:`SearchConfig.children_per_s` per second of the reference, shared by the attempts: a count, not a clock, so
+that a seed gives the same result on any machine): the segments chosen so far are kept.
+Why: with no object at all, 12 of the 20 shared real takes fell while walking (``bench_physicalize_real.py
+--robot-only``), each after its capture-point step saturated; an offline plan alone cannot know the states the
+robot reaches, and an open-loop sampler without the QP's balance in the loop did not repair a fall (FIELD-NOTES).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from physicalize.balance import DRIFT_M
+from physicalize.reference import Reference
+from physicalize.rollout import Rollout, Snapshot, Tracker
+from physicalize.search.guide import GuidedReference, Segment
+from physicalize.validate import LIMIT_TOL, OBJECT_LOST_M, Bars
+from physicalize.wbc import WholeBodyController
+from pipeline.robot import G1_JOINT_NAMES, JOINTS_QPOS
+from pipeline.scene import Scene
+
+FALL_COST = 100.0
+BAR_COST = 1.0
+BARS = Bars()
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """The search's budget and spread (seconds of the reference, metres)."""
+
+    segment_s: float = 0.5
+    lookahead_s: float = 0.5
+    children: int = 12
+    beam: int = 3
+    com_sigma_m: float = 0.03
+    step_sigma_m: float = 0.05
+    ramp_s: float = 0.1
+    start_before_s: float = 1.0
+    # children per second of the reference, all attempts together: a child simulates segment_s + lookahead_s at
+    # ~0.08 CPU-s on the shared takes, so 220 cost ~18 CPU-s per second of motion at most (the issue's bound: 20)
+    children_per_s: float = 220.0
+    seed: int = 0
+    attempts: int = 3  # searches with seeds seed, seed + 1, ... until one is valid, sharing the budget
+
+    def __post_init__(self):
+        for name in ("segment_s", "lookahead_s", "ramp_s", "children_per_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"SearchConfig.{name}: must be > 0, got {getattr(self, name)}")
+        for name in ("children", "beam", "attempts"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"SearchConfig.{name}: must be >= 1, got {getattr(self, name)}")
+        if self.com_sigma_m < 0 or self.step_sigma_m < 0 or self.start_before_s < 0:
+            raise ValueError("SearchConfig: com_sigma_m, step_sigma_m and start_before_s must be >= 0")
+
+
+@dataclass(frozen=True)
+class Elite:
+    snapshot: Snapshot
+    segments: tuple[Segment, ...]
+    cost: float
+
+
+@dataclass
+class SearchResult:
+    """The re-simulated rollout of the best segments, and what the search cost."""
+
+    rollout: Rollout
+    segments: tuple[Segment, ...]
+    cpu_s: float
+    children: int
+    start: int
+
+
+def drift_onset(ref: Reference, roll: Rollout) -> int:
+    """First frame of ``roll`` whose pelvis is :data:`physicalize.balance.DRIFT_M` off ``ref``'s (else the fall)."""
+    err = np.linalg.norm(roll.qpos[:, :2] - ref.qpos[: roll.frames, :2], axis=1)
+    far = np.flatnonzero(err > DRIFT_M)
+    return int(far[0]) if far.size else (roll.fell_at or roll.frames)
+
+
+@dataclass(frozen=True)
+class Scorer:
+    """What a child's cost reads: the reference, the G1 joints' ranges widened by the validity tolerance
+    (:data:`physicalize.validate.LIMIT_TOL`) and the objects' reference tracks at their ``qpos`` addresses."""
+
+    ref: Reference
+    lo: np.ndarray
+    hi: np.ndarray
+    objects: tuple[tuple[int, np.ndarray], ...] = ()
+
+    @classmethod
+    def of(cls, scene: Scene, ref: Reference, objects: dict[str, np.ndarray] | None = None) -> Scorer:
+        m = scene.model
+        lo, hi = m.jnt_range[[m.joint(j).id for j in G1_JOINT_NAMES]].T
+        tracks = tuple((scene.object_qpos_adr[n], np.asarray(p)) for n, p in (objects or {}).items())
+        return cls(ref, lo - LIMIT_TOL, hi + LIMIT_TOL, tracks)
+
+    def cost(self, tracker: Tracker, start: int, stop: int, segment: Segment) -> float:
+        """A child's cost over frames ``[start, stop)``, the validity bars first: :data:`FALL_COST` times the share of
+        the window lost to a fall; :data:`BAR_COST` times the number of its frames with a joint past its range, a
+        contact deeper than the penetration bar, the pelvis farther than the root bar from the reference or an object
+        lost (:class:`physicalize.validate.Bars`, :data:`physicalize.validate.OBJECT_LOST_M`); then the pelvis's and
+        the objects' mean distance from their reference and the pelvis's final one, and a tenth of the offsets' size
+        (of two equal rollouts, the one that changes less)."""
+        qpos = np.asarray(tracker.rec["qpos"][start:stop])
+        if not len(qpos):
+            return FALL_COST
+        ref = self.ref.qpos[start : start + len(qpos)]
+        err = np.linalg.norm(qpos[:, :2] - ref[:, :2], axis=1)
+        missed = np.linalg.norm(qpos[:, :3] - ref[:, :3], axis=1) > BARS.root_pos_err_max_m
+        joints = qpos[:, JOINTS_QPOS]
+        missed |= ((joints < self.lo) | (joints > self.hi)).any(axis=1)
+        missed |= np.asarray(tracker.rec["penetration"][start:stop]) > BARS.penetration_max_m
+        soft = float(err.mean() + err[-1])
+        for adr, track in self.objects:
+            e = np.linalg.norm(qpos[:, adr : adr + 3] - track[start : start + len(qpos), :3], axis=1)
+            missed |= e > OBJECT_LOST_M
+            soft += float(e.mean())
+        lost = 0.0 if tracker.fell_at is None else 1.0 - (tracker.fell_at - start) / max(stop - start, 1)
+        size = float(np.linalg.norm(segment.com) + np.linalg.norm(segment.step))
+        return FALL_COST * max(lost, 0.0) + BAR_COST * float(missed.sum()) + soft + 0.1 * size
+
+
+def search(
+    scene: Scene,
+    ref: Reference,
+    make_controller: Callable[[], WholeBodyController],
+    qpos0: np.ndarray,
+    qvel0: np.ndarray,
+    nominal: Rollout,
+    config: SearchConfig = SearchConfig(),
+    *,
+    contact_links: tuple[str, ...] = (),
+    objects: dict[str, np.ndarray] | None = None,
+    max_children: int | None = None,
+) -> SearchResult | None:
+    """The module docstring's search from the ``nominal`` rollout's drift onset; None when it did not fall.
+    ``objects``: the objects' reference tracks ({name: (T, 7)}), whose loss the children's cost counts."""
+    if nominal.fell_at is None:
+        return None
+    cpu0, fps, T = time.process_time(), ref.fps, ref.frames
+    L, H = max(int(round(config.segment_s * fps)), 1), int(round(config.lookahead_s * fps))
+    ramp = int(round(config.ramp_s * fps))
+    start = max(0, drift_onset(ref, nominal) - int(round(config.start_before_s * fps)))
+    rng = np.random.default_rng(config.seed)
+    sigma = np.array([config.com_sigma_m] * 2 + [config.step_sigma_m] * 2)
+    scorer = Scorer.of(scene, ref, objects)
+    tracker = Tracker(scene, ref, make_controller(), qpos0, qvel0, contact_links=contact_links)
+    tracker.run(start)
+    beam, children, s = [Elite(tracker.snapshot(), (), 0.0)], 0, start
+    budget = int(config.children_per_s * T / fps) if max_children is None else max_children
+    while s < T and children < budget:
+        stop = min(s + L, T)
+        offspring = []
+        for elite in beam:
+            for c in range(config.children):
+                theta = np.zeros(4) if c == 0 else rng.normal(0.0, sigma)
+                seg = Segment(s, stop, (float(theta[0]), float(theta[1])), (float(theta[2]), float(theta[3])))
+                tracker.restore(elite.snapshot)
+                tracker.ref = GuidedReference(ref, elite.segments + (seg,), ramp)
+                tracker.run(stop)
+                snap = tracker.snapshot()
+                tracker.run(stop + H)
+                offspring.append(Elite(snap, elite.segments + (seg,), scorer.cost(tracker, s, stop + H, seg)))
+                children += 1
+        beam = sorted(offspring, key=lambda e: e.cost)[: config.beam]
+        s = stop
+    best = beam[0].segments
+    guided = GuidedReference(ref, best, ramp)
+    final = Tracker(scene, guided, make_controller(), qpos0, qvel0, contact_links=contact_links)
+    final.run(T)
+    return SearchResult(final.rollout(), best, time.process_time() - cpu0, children, start)
