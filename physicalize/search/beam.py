@@ -40,6 +40,7 @@ from pipeline.scene import Scene
 
 FALL_COST = 100.0
 BAR_COST = 1.0
+OBJECT_DRIFT_M = 0.1  # an object this far from its reference track has started to be lost
 BARS = Bars()
 
 
@@ -53,6 +54,9 @@ class SearchConfig:
     beam: int = 3
     com_sigma_m: float = 0.03
     step_sigma_m: float = 0.05
+    # drawn only for a clip with objects (after the CoM and step draws: a robot-alone search is unchanged by them)
+    hands_sigma_m: float = 0.03
+    press_sigma: float = 0.3  # of the log-scale of the hands' planned force
     ramp_s: float = 0.1
     start_before_s: float = 1.0
     # children per second of the reference, all attempts together: a child simulates segment_s + lookahead_s at
@@ -68,8 +72,9 @@ class SearchConfig:
         for name in ("children", "beam", "attempts"):
             if getattr(self, name) < 1:
                 raise ValueError(f"SearchConfig.{name}: must be >= 1, got {getattr(self, name)}")
-        if self.com_sigma_m < 0 or self.step_sigma_m < 0 or self.start_before_s < 0:
-            raise ValueError("SearchConfig: com_sigma_m, step_sigma_m and start_before_s must be >= 0")
+        for name in ("com_sigma_m", "step_sigma_m", "hands_sigma_m", "press_sigma", "start_before_s"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"SearchConfig.{name}: must be >= 0, got {getattr(self, name)}")
 
 
 @dataclass(frozen=True)
@@ -90,10 +95,13 @@ class SearchResult:
     start: int
 
 
-def drift_onset(ref: Reference, roll: Rollout) -> int:
-    """First frame of ``roll`` whose pelvis is :data:`physicalize.balance.DRIFT_M` off ``ref``'s (else the fall)."""
-    err = np.linalg.norm(roll.qpos[:, :2] - ref.qpos[: roll.frames, :2], axis=1)
-    far = np.flatnonzero(err > DRIFT_M)
+def drift_onset(ref: Reference, roll: Rollout, objects: tuple[tuple[int, np.ndarray], ...] = ()) -> int:
+    """First frame of ``roll`` whose pelvis is :data:`physicalize.balance.DRIFT_M` off ``ref``'s or an object
+    :data:`OBJECT_DRIFT_M` off its reference track (``objects``: (qpos address, track) pairs); else the fall."""
+    err = np.linalg.norm(roll.qpos[:, :2] - ref.qpos[: roll.frames, :2], axis=1) > DRIFT_M
+    for adr, track in objects:
+        err |= np.linalg.norm(roll.qpos[:, adr : adr + 3] - track[: roll.frames, :3], axis=1) > OBJECT_DRIFT_M
+    far = np.flatnonzero(err)
     return int(far[0]) if far.size else (roll.fell_at or roll.frames)
 
 
@@ -136,7 +144,9 @@ class Scorer:
             missed |= e > OBJECT_LOST_M
             soft += float(e.mean())
         lost = 0.0 if tracker.fell_at is None else 1.0 - (tracker.fell_at - start) / max(stop - start, 1)
-        size = float(np.linalg.norm(segment.com) + np.linalg.norm(segment.step))
+        size = float(
+            np.linalg.norm(segment.com) + np.linalg.norm(segment.step) + np.linalg.norm(segment.hands)
+        ) + 0.1 * abs(segment.press)
         return FALL_COST * max(lost, 0.0) + BAR_COST * float(missed.sum()) + soft + 0.1 * size
 
 
@@ -160,10 +170,11 @@ def search(
     cpu0, fps, T = time.process_time(), ref.fps, ref.frames
     L, H = max(int(round(config.segment_s * fps)), 1), int(round(config.lookahead_s * fps))
     ramp = int(round(config.ramp_s * fps))
-    start = max(0, drift_onset(ref, nominal) - int(round(config.start_before_s * fps)))
+    scorer = Scorer.of(scene, ref, objects)
+    start = max(0, drift_onset(ref, nominal, scorer.objects) - int(round(config.start_before_s * fps)))
     rng = np.random.default_rng(config.seed)
     sigma = np.array([config.com_sigma_m] * 2 + [config.step_sigma_m] * 2)
-    scorer = Scorer.of(scene, ref, objects)
+    held_sigma = np.array([config.hands_sigma_m] * 3 + [config.press_sigma])
     tracker = Tracker(scene, ref, make_controller(), qpos0, qvel0, contact_links=contact_links)
     tracker.run(start)
     beam, children, s = [Elite(tracker.snapshot(), (), 0.0)], 0, start
@@ -173,8 +184,11 @@ def search(
         offspring = []
         for elite in beam:
             for c in range(config.children):
-                theta = np.zeros(4) if c == 0 else rng.normal(0.0, sigma)
-                seg = Segment(s, stop, (float(theta[0]), float(theta[1])), (float(theta[2]), float(theta[3])))
+                seg = Segment(s, stop)
+                if c:
+                    theta = rng.normal(0.0, sigma)
+                    held = rng.normal(0.0, held_sigma) if scorer.objects else np.zeros(4)
+                    seg = Segment(s, stop, tuple(theta[:2]), tuple(theta[2:]), tuple(held[:3]), float(held[3]))
                 tracker.restore(elite.snapshot)
                 tracker.ref = GuidedReference(ref, elite.segments + (seg,), ramp)
                 tracker.run(stop)
