@@ -62,8 +62,12 @@ import: install
 
 TEACHER ?= base
 PROFILE ?= mjlab
+# SEARCH_BUDGET: children per second of motion of the search with the QP in the loop where the teacher falls
+# (physicalize/search/; 0: no search; the default is SearchConfig's)
+SEARCH_BUDGET ?=
 physicalize: install
-	$(CLI) physicalize $(STAGE_ARGS) $(RUN_ARGS) --teacher $(TEACHER) --profile $(PROFILE) $(if $(KEEP_INVALID),--keep-invalid)
+	$(CLI) physicalize $(STAGE_ARGS) $(RUN_ARGS) --teacher $(TEACHER) --profile $(PROFILE) $(if $(KEEP_INVALID),--keep-invalid) \
+		$(if $(SEARCH_BUDGET),--search-budget $(SEARCH_BUDGET))
 
 # Smoke scale (CPU, ~1-2 min): a residual on one retargeted clip; then `make physicalize TEACHER=base+residual:$(CKPT)`.
 EPISODE ?= 0
