@@ -326,7 +326,8 @@ def _add_residual(sub) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--profile", default="mjlab", help="actuator profile (default mjlab)")
     p.add_argument("--out", required=True, help="checkpoint path (.pt)")
-    p.set_defaults(func=_cmd_physicalize_residual)
+    # it reads datasets/<NAME>/retargeted/ (and `make train-residual` writes its checkpoint there): one writer at a time
+    p.set_defaults(func=_cmd_physicalize_residual, writes="name")
 
 
 def build_parser() -> argparse.ArgumentParser:
