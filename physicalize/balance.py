@@ -11,6 +11,9 @@ validity figures (:mod:`physicalize.validate`). Not bars: causes.
   (:mod:`physicalize.stepping`) moved the foot more than :data:`STEP_ADJUST_M`, and the largest such shift;
 * ``support_mismatch_frac`` -- frames whose measured foot contacts (a foot pressing the floor with more than
   ``touch_force``) differ from the planned support;
+
+and, the same for every rollout of one reference (:func:`reference_balance_figures`, computed once per clip):
+
 * ``reference_single_support_max_s`` -- the longest single-support run of the tracked reference;
 * ``plan_zmp_outside_max_m`` -- how far the planned ZMP leaves the planned support polygon (0: the plan is
   supportable by the feet it plans);
@@ -27,6 +30,7 @@ from physicalize.plan import clip_to_polygon, support_polygon
 from physicalize.reference import Reference
 from physicalize.rollout import Rollout
 from pipeline.foot_contact import runs
+from pipeline.rotations import yaw_of
 
 DRIFT_M = 0.05
 PRE_FALL_S = 0.2
@@ -47,13 +51,6 @@ def simulated_com(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
     return out
 
 
-def _heading(quat_wxyz: np.ndarray) -> np.ndarray:
-    """(T, 2) unit heading of the root quaternions (wxyz) in the floor plane."""
-    w, x, y, z = quat_wxyz.T
-    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return np.stack([np.cos(yaw), np.sin(yaw)], axis=-1)
-
-
 def _zmp_outside(ref: Reference, zmp: np.ndarray | None) -> float:
     """Largest distance of the planned ZMP from the planned support polygon (0 inside)."""
     if zmp is None:
@@ -67,9 +64,22 @@ def _zmp_outside(ref: Reference, zmp: np.ndarray | None) -> float:
     return worst
 
 
-def balance_figures(model: mujoco.MjModel, ref: Reference, roll: Rollout, zmp: np.ndarray | None, touch_force: float):
-    """The figures of the module docstring for one rollout of ``ref`` (``zmp``: the planned ZMP, None when the
-    reference was not planned)."""
+def reference_balance_figures(ref: Reference, zmp: np.ndarray | None) -> dict:
+    """The reference's figures of the module docstring (``zmp``: the planned ZMP, None when the reference was not
+    planned)."""
+    single = ref.stance.sum(axis=1) == 1
+    yaw = yaw_of(ref.qpos[:, 3:7])
+    lateral = np.stack([-np.sin(yaw), np.cos(yaw)], axis=-1)  # the pelvis's left in the floor plane
+    gap = np.einsum("ti,ti->t", ref.foot_pos[:, 0, :2] - ref.foot_pos[:, 1, :2], lateral)
+    return {
+        "reference_single_support_max_s": max((b - a for a, b in runs(single)), default=0) / ref.fps,
+        "plan_zmp_outside_max_m": _zmp_outside(ref, zmp),
+        "reference_foot_gap_min_m": float(gap.min()) if len(gap) else 0.0,
+    }
+
+
+def balance_figures(model: mujoco.MjModel, ref: Reference, roll: Rollout, touch_force: float) -> dict:
+    """The rollout's figures of the module docstring, for one rollout of ``ref``."""
     fps, T = ref.fps, roll.frames
     pelvis = np.linalg.norm(roll.qpos[:, :2] - ref.qpos[:T, :2], axis=1)
     plan = ref.com if ref.com_plan is None else ref.com_plan
@@ -93,10 +103,4 @@ def balance_figures(model: mujoco.MjModel, ref: Reference, roll: Rollout, zmp: n
     figures["step_adjust_max_m"] = max(adjusted, default=0.0)
     measured = roll.foot_force > touch_force
     figures["support_mismatch_frac"] = float((measured != ref.stance[:T]).any(axis=1).mean()) if T else 0.0
-    single = ref.stance.sum(axis=1) == 1
-    figures["reference_single_support_max_s"] = max((b - a for a, b in runs(single)), default=0) / fps
-    figures["plan_zmp_outside_max_m"] = _zmp_outside(ref, zmp)
-    lateral = np.stack([-_heading(ref.qpos[:, 3:7])[:, 1], _heading(ref.qpos[:, 3:7])[:, 0]], axis=-1)
-    gap = np.einsum("ti,ti->t", ref.foot_pos[:, 0, :2] - ref.foot_pos[:, 1, :2], lateral)
-    figures["reference_foot_gap_min_m"] = float(gap.min()) if len(gap) else 0.0
     return figures

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physicalize.balance import balance_figures, simulated_com
+from physicalize.balance import balance_figures, reference_balance_figures, simulated_com
 from physicalize.feasibility import (
     grasp_feasibility,
     grasp_opposition,
@@ -164,7 +164,7 @@ def _figures(
     return figures
 
 
-def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, zmp, tried, gains, config: SearchConfig):
+def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, gains, config: SearchConfig):
     """``(gain set, rollout, figures)`` of the search (:mod:`physicalize.search.beam`) from the gain set whose rollout
     fell last: up to ``config.attempts`` searches (seeds ``config.seed``, ``+ 1``, ...) sharing the budget
     (:attr:`~physicalize.search.beam.SearchConfig.children_per_s`) until one's rollout is valid, else the last; its
@@ -184,7 +184,7 @@ def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, zmp, trie
         figures = _figures(scene, found.rollout, clip, objects, *state0, None, ref_figures)
         if figures["valid"] or children >= budget:
             break
-    figures.update(balance_figures(scene.model, ref, found.rollout, zmp, gains[index].touch_force))
+    figures.update(balance_figures(scene.model, ref, found.rollout, gains[index].touch_force))
     figures["search"] = {
         "gain_set": index,
         "start_s": found.start / clip.fps,
@@ -244,6 +244,7 @@ def physicalize_clip(
         ref_figures[0].update(payload)
     if (rejected := rejection(ref_figures[0])) is not None:
         return None, None, _rejected(ref_figures[0], rejected), {}
+    ref_figures[0].update(reference_balance_figures(ref, zmp))  # the same for every rollout: once
     holds = ref.grasp is not None and bool(ref.grasp.grasped.any())
     tried = []
     for index, config in enumerate(gains):
@@ -256,7 +257,7 @@ def physicalize_clip(
         )
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
         figures = _figures(scene, roll, clip, objects, qpos0, qvel0, perturb, ref_figures)
-        figures.update(balance_figures(scene.model, ref, roll, zmp, config.touch_force))
+        figures.update(balance_figures(scene.model, ref, roll, config.touch_force))
         tried.append((index, roll, figures))
         if tried[-1][2]["valid"]:
             break
@@ -265,7 +266,7 @@ def physicalize_clip(
         figures["reason"] += "".join(f"; gain set {k}: {f['reason'].split(';')[0]}" for k, _, f in tried[1:])
     if not figures["valid"] and search is not None and residual is None and perturb is None:
         t0, cpu0 = time.perf_counter(), time.process_time()
-        found = _search(scene, ref, clip, objects, (qpos0, qvel0), ref_figures, zmp, tried, gains, search)
+        found = _search(scene, ref, clip, objects, (qpos0, qvel0), ref_figures, tried, gains, search)
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
         if found is not None and found[2]["valid"]:
             kept, roll, figures = found

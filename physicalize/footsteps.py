@@ -19,6 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from physicalize.reference import Reference
 from pipeline.foot_contact import runs
+from pipeline.rotations import yaw_of
 
 Footstep = tuple[int, int, np.ndarray, Rotation]  # (first planted frame, stop, footstep position, footstep rotation)
 
@@ -33,8 +34,7 @@ class FootTargets:
 
 
 def _yaw_rotation(quat_wxyz: np.ndarray) -> Rotation:
-    w, x, y, z = quat_wxyz
-    return Rotation.from_euler("z", np.arctan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z)))
+    return Rotation.from_euler("z", yaw_of(quat_wxyz))
 
 
 def _rot(quat_wxyz: np.ndarray) -> Rotation:

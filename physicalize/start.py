@@ -34,7 +34,7 @@ from physicalize.reference import build_reference, place_on_floor
 from pipeline.clip import START_PREFIX_KEY, RobotClip
 from pipeline.kinematics import qvel_from_qpos
 from pipeline.robot import FOOT_BODIES, g1_model, sole_corners
-from pipeline.rotations import slerp_wxyz, yaw_quat
+from pipeline.rotations import slerp_wxyz, yaw_of, yaw_quat
 from pipeline.terms.layout import CONTROL_FPS
 
 SETTLE_S = 0.5  # s: the stance held still
@@ -63,8 +63,7 @@ def _swing_feet(q: np.ndarray) -> list[int]:
 
 def _yaw_quat(quat: np.ndarray) -> np.ndarray:
     """The heading part (rotation about z) of a wxyz quaternion."""
-    w, x, y, z = quat
-    return yaw_quat(float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))))
+    return yaw_quat(float(yaw_of(quat)))
 
 
 def standing_pose(q0: np.ndarray) -> np.ndarray:

@@ -44,6 +44,13 @@ def slerp_wxyz(times: np.ndarray, q: np.ndarray, new_times: np.ndarray) -> np.nd
 Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
 
+def yaw_of(quat_wxyz: np.ndarray) -> np.ndarray:
+    """The heading [rad] (rotation about the world z axis) of wxyz quaternions ``(..., 4)``:
+    ``atan2(2 (w z + x y), 1 - 2 (y^2 + z^2))``."""
+    w, x, y, z = np.moveaxis(np.asarray(quat_wxyz), -1, 0)
+    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
 def yaw_quat(yaw: float) -> np.ndarray:
     """The unit quaternion (wxyz) of a rotation by ``yaw`` [rad] about the world z axis."""
     return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
