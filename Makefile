@@ -50,15 +50,17 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 	$(UV) pip install --python $(PY) -c constraints.txt -e ".[dev]"
 	touch $@
 
+# RETARGET_ARGS: the readers' and scaling's options, e.g. "--fps 30 --units cm --height 1.62" (lessmimic retarget -h)
+RETARGET_ARGS ?=
 retarget: install
-	$(CLI) retarget $(STAGE_ARGS) $(RUN_ARGS) $(AUGMENT_ARGS)
+	$(CLI) retarget $(STAGE_ARGS) $(RUN_ARGS) $(AUGMENT_ARGS) $(RETARGET_ARGS)
 
 # Bring your own G1 motion (BeyondMimic .npz, GMR .pkl, HDMI folders) as the retargeted stage: make import physicalize features INPUT=...
 OBJECT_MESH ?=
 OBJECT_MASS ?=
 import: install
 	$(CLI) import --name $(NAME) $(if $(INPUT),--input "$(INPUT)") $(if $(OVERWRITE),--overwrite) $(RUN_ARGS) \
-		$(if $(OBJECT_MESH),--object-mesh $(OBJECT_MESH)) $(if $(OBJECT_MASS),--object-mass $(OBJECT_MASS))
+		$(if $(OBJECT_MESH),--object-mesh "$(OBJECT_MESH)") $(if $(OBJECT_MASS),--object-mass $(OBJECT_MASS))
 
 TEACHER ?= base
 PROFILE ?= mjlab
@@ -66,7 +68,7 @@ PROFILE ?= mjlab
 # (physicalize/search/; 0: no search; the default is SearchConfig's)
 SEARCH_BUDGET ?=
 physicalize: install
-	$(CLI) physicalize $(STAGE_ARGS) $(RUN_ARGS) --teacher $(TEACHER) --profile $(PROFILE) $(if $(KEEP_INVALID),--keep-invalid) \
+	$(CLI) physicalize $(STAGE_ARGS) $(RUN_ARGS) --teacher "$(TEACHER)" --profile $(PROFILE) $(if $(KEEP_INVALID),--keep-invalid) \
 		$(if $(SEARCH_BUDGET),--search-budget $(SEARCH_BUDGET))
 
 # Smoke scale (CPU, ~1-2 min): a residual on one retargeted clip; then `make physicalize TEACHER=base+residual:$(CKPT)`.
@@ -76,7 +78,7 @@ ENVS ?= 8
 SEED ?= 0
 CKPT ?= datasets/$(NAME)/residual_ep$(EPISODE).pt
 train-residual: install
-	$(CLI) physicalize-residual --name $(NAME) --episode $(EPISODE) --iterations $(ITERATIONS) --envs $(ENVS) --seed $(SEED) --out $(CKPT)
+	$(CLI) physicalize-residual --name $(NAME) --episode $(EPISODE) --iterations $(ITERATIONS) --envs $(ENVS) --seed $(SEED) --out "$(CKPT)"
 
 features: install
 	$(CLI) features --name $(NAME) $(if $(OVERWRITE),--overwrite) $(RUN_ARGS)
@@ -124,7 +126,7 @@ TRAIN_ARGS ?=
 # `make train-bc CORPUS=demo RUN=demo CONTRACT=lessmimic_demo`.
 CONTRACT ?= lessmimic
 train-bc: install
-	$(CLI) train-bc --name $(CORPUS) --run runs/$(RUN) --contract $(CONTRACT) $(if $(ABLATION),--ablation=$(ABLATION)) $(if $(OVERWRITE),--overwrite) $(TRAIN_ARGS)
+	$(CLI) train-bc --name $(CORPUS) --run "runs/$(RUN)" --contract $(CONTRACT) $(if $(ABLATION),--ablation=$(ABLATION)) $(if $(OVERWRITE),--overwrite) $(TRAIN_ARGS)
 
 # Train II (paper Sec. III-C): PPO from runs/$(RUN)/policy.pt with the AIP and AMP style priors, objects scaled per
 # axis in 0.4-1.6, into runs/$(RUN)/aip/: 600 iterations x 8 envs x 24 steps = 115k env steps, ~10 min on one core, a
@@ -139,7 +141,7 @@ train-bc: install
 AIP_ARGS ?=
 BACKEND ?= cpu
 train-aip: install
-	$(CLI) train-aip --name $(CORPUS) --run runs/$(RUN) --backend $(BACKEND) $(if $(ABLATION),--ablation=$(ABLATION)) $(AIP_ARGS)
+	$(CLI) train-aip --name $(CORPUS) --run "runs/$(RUN)" --backend $(BACKEND) $(if $(ABLATION),--ablation=$(ABLATION)) $(AIP_ARGS)
 
 # Train III (paper Sec. III-D): a vision student distilled from DISTILL_TEACHER (a MoCap-DF policy; default the run's) by
 # DAgger on egocentric depth (64 x 40 at the G1's D435 mount) under the physical and the sensor's randomisations, into
@@ -149,21 +151,21 @@ train-aip: install
 DISTILL_TEACHER ?= runs/$(RUN)/policy.pt
 DISTILL_ARGS ?=
 distill: install
-	$(CLI) distill --name $(CORPUS) --teacher $(DISTILL_TEACHER) --run runs/$(RUN)/vision $(if $(OVERWRITE),--overwrite) $(DISTILL_ARGS)
+	$(CLI) distill --name $(CORPUS) --teacher "$(DISTILL_TEACHER)" --run "runs/$(RUN)/vision" $(if $(OVERWRITE),--overwrite) $(DISTILL_ARGS)
 
 # EVAL_ARGS="--chains 5,10" adds the long-horizon chains (Table 3) of the policy; "--episodes 8" more per cell.
 # POLICY=runs/$(RUN)/policy.onnx evaluates the exported file through onnxruntime in the same harness.
 POLICY ?= runs/$(RUN)/policy.pt
 EVAL_ARGS ?=
 eval: install
-	$(CLI) eval --name $(CORPUS) --policy $(POLICY) --teacher $(EVAL_ARGS)
+	$(CLI) eval --name $(CORPUS) --policy "$(POLICY)" --teacher $(EVAL_ARGS)
 
 # The policy as ONNX with its metadata (train/export/): runs/$(RUN)/policy.onnx beside POLICY; EXPORT_ARGS="--overwrite".
 # FORMAT=lessmimic-demo: the released web demo's three files in runs/$(RUN)/lessmimic_demo/ (a CONTRACT=lessmimic_demo run).
 FORMAT ?= onnx
 EXPORT_ARGS ?=
 export: install
-	$(CLI) export --policy $(POLICY) --format $(FORMAT) $(EXPORT_ARGS)
+	$(CLI) export --policy "$(POLICY)" --format $(FORMAT) $(EXPORT_ARGS)
 
 # A dataset's G1 motions for other trainers (motion_export/): the valid episodes of datasets/$(NAME)/physicalized/ as
 # FORMAT=mjlab-npz (default here: mjlab's tracking task / BeyondMimic), hdmi (motion.npz + meta.json folders), gmr (.pkl)
@@ -212,7 +214,7 @@ bench-train: install
 # The mjlab backend's speed on a CUDA GPU (bench/bench_train_mjlab.py): physics alone, the environment, and PPO
 # plain / + randomisations / + priors at 4096 worlds, from POLICY (a BC + DAgger policy.pt).
 bench-train-mjlab: install
-	$(PY) bench/bench_train_mjlab.py --name $(CORPUS) --policy $(POLICY)
+	$(PY) bench/bench_train_mjlab.py --name $(CORPUS) --policy "$(POLICY)"
 
 bench-features: install
 	$(PY) bench/bench_features.py
@@ -220,7 +222,7 @@ bench-features: install
 # ONNX export beside its torch checkpoint (bench/bench_export.py): export seconds, parity on recorded observations,
 # latency of one call; POLICY a trained policy.pt.
 bench-export: install
-	$(PY) bench/bench_export.py --policy $(POLICY) --name $(CORPUS)
+	$(PY) bench/bench_export.py --policy "$(POLICY)" --name $(CORPUS)
 
 # Motion export per format (bench/bench_export_motion.py): file size and frames written per second over the valid
 # episodes of datasets/$(CORPUS)/physicalized/.
@@ -229,11 +231,11 @@ bench-export-motion: install
 
 # The vision stage's speed (bench/bench_vision.py); POLICY (or RUN) a MoCap policy.pt, default runs/adam_seed0/policy.pt.
 bench-vision: install
-	$(PY) bench/bench_vision.py --name $(CORPUS) $(if $(filter-out file,$(origin POLICY) $(origin RUN)),--policy $(POLICY))
+	$(PY) bench/bench_vision.py --name $(CORPUS) $(if $(filter-out file,$(origin POLICY) $(origin RUN)),--policy "$(POLICY)")
 
 # Depth on mjlab, CUDA GPU (bench/bench_vision_mjlab.py): env steps/s at 4096 worlds without and with the depth camera.
 bench-vision-mjlab: install
-	$(PY) bench/bench_vision_mjlab.py --name $(CORPUS) $(if $(filter-out file,$(origin POLICY) $(origin RUN)),--policy $(POLICY)) $(BENCH_ARGS)
+	$(PY) bench/bench_vision_mjlab.py --name $(CORPUS) $(if $(filter-out file,$(origin POLICY) $(origin RUN)),--policy "$(POLICY)") $(BENCH_ARGS)
 
 # The GPU slot's payload (bench/gpu_slot.sh, issue 43 part 6; no venv needed): the wheels the GPU machine's image lacks
 # (bench/gpu_slot_wheels.txt) for its Python 3.12 from PyPI, imageio-ffmpeg's binary-free wheel built from its PyPI
