@@ -27,7 +27,7 @@ from pipeline.clip import PhysicalizedClip
 from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.clips import episodes_to_physicalized_clips, physicalized_clips_to_episodes
 from pipeline.dataset.objects import objects_note
-from pipeline.dataset.read import read_card
+from pipeline.dataset.read import read_card, read_info
 from pipeline.dataset.schema import Feature
 from pipeline.dataset.write import write_dataset
 from pipeline.errors import InputError
@@ -224,6 +224,9 @@ def run_stage(
     src = stage_dir(name, "physicalized")
     if not (src / "meta" / "info.json").is_file():
         return _nothing_to_do(src)
+    if not any(k.startswith("object") and k.endswith(".pose") for k in read_info(src)["features"]):  # before work
+        why = "the dataset has no object tracks: distance-field features need at least one object"
+        raise InputError(src, "objects", why)
     run = StageRun(
         stage_dir(name, "features"),
         fingerprint(stage="features", physicalized=dataset_fingerprint(src), config=asdict(cfg)),
@@ -233,9 +236,6 @@ def run_stage(
     run.begin(overwrite)
     clips = episodes_to_physicalized_clips(src)
     names = [o.name for o in clips[0].robot.objects]
-    if not names:
-        why = "the dataset has no object tracks: distance-field features need at least one object"
-        raise InputError(src, "objects", why)
     t0 = time.perf_counter()
     compute = partial(features_one, config=cfg)
     results = run.map(compute, list(enumerate(clips)), key=_clip_key, jobs=jobs, executor=executor, desc="features")

@@ -27,6 +27,7 @@ from ingest import default_input, synthetic
 from ingest.default_input import TASKS, default_clips
 from ingest.synthetic import CHAIN, CHAIN_ORDERS, chain_demo
 from pipeline.clip import HumanClip
+from pipeline.collision_mesh import check_meshes
 from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.clips import human_clips_to_episodes
 from pipeline.dataset.objects import objects_note
@@ -37,6 +38,7 @@ from pipeline.stage.atomic import write_json_atomic
 from pipeline.stage.inspect_log import write_human_log
 from pipeline.stage.paths import file_stem, stage_dir
 from pipeline.stage.state import files_fingerprint, fingerprint
+from pipeline.suspicious import collecting
 
 HUMAN_FPS = 30
 
@@ -116,14 +118,22 @@ def synthetic_corpus(spec: str, fps: float = 30.0) -> list[HumanClip]:
     return clips
 
 
-def load_input(input_path: str | None, *, body_model: str | None = None, fps: float | None = None) -> list[HumanClip]:
+def load_input(
+    input_path: str | None,
+    *,
+    body_model: str | None = None,
+    fps: float | None = None,
+    units: str | None = None,
+    mesh: str | None = None,
+) -> list[HumanClip]:
     """Clips from ``input_path`` (file or folder, or a ``synthetic:<seeds>[:<tasks>]`` corpus:
-    :func:`synthetic_corpus`), or the embedded synthetic default when None."""
+    :func:`synthetic_corpus`), or the embedded synthetic default when None; ``fps``, ``units`` and ``mesh`` are the
+    readers' (:mod:`pipeline.readers`) for files that carry none."""
     if input_path is None:
         return default_clips()
     if is_synthetic_spec(input_path):
         return synthetic_corpus(input_path, fps or 30.0)
-    return read_clips(Path(input_path), body_model=body_model, fps=fps)
+    return read_clips(Path(input_path), body_model=body_model, fps=fps, units=units, mesh=mesh)
 
 
 def source_fingerprint(input_path: str | None) -> str:
@@ -154,14 +164,17 @@ def ingest(
     overwrite: bool = False,
     body_model: str | None = None,
     root: Path | None = None,
+    read: dict | None = None,
 ) -> IngestResult:
-    """Read, validate and resample to :data:`HUMAN_FPS`, write the dataset, reload it with LeRobot."""
+    """Read, validate and resample to :data:`HUMAN_FPS`, write the dataset, reload it with LeRobot; ``read``: the
+    readers' options (``fps``, ``units``, ``mesh``: :func:`load_input`)."""
     out = stage_dir(name, "human", root)
     check_target(out, overwrite)  # before any work, so the user sees only this line
     t0 = time.perf_counter()
-    clips = [
-        c.resampled(HUMAN_FPS) for c in tqdm(load_input(input_path, body_model=body_model), desc="read", unit="clip")
-    ]
+    with collecting() as suspicious:  # printed once each, and in the report (pipeline.suspicious)
+        loaded = load_input(input_path, body_model=body_model, **(read or {}))
+    check_meshes(loaded)  # before any work: a degenerate mesh is found here, not by the retargeting of its clip
+    clips = [c.resampled(HUMAN_FPS) for c in tqdm(loaded, desc="read", unit="clip")]
     synthetic = any(c.synthetic for c in clips)
     features, episodes = human_clips_to_episodes(clips)
     card = DatasetCard(
@@ -212,6 +225,7 @@ def ingest(
         "frames": reloaded.num_frames,
         "episodes": reloaded.num_episodes,
         "seconds_wall": seconds,
+        "warnings": suspicious,
     }
     write_json_atomic(out / "report.json", report)
     return IngestResult(out, tuple(clips), report)

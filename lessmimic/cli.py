@@ -14,11 +14,12 @@ stops in one line naming the first.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
-from pathlib import Path
 
 from lessmimic.corpus_commands import add_corpus
 from lessmimic.export_commands import add_export_motion
+from lessmimic.residual_commands import add_residual
 from lessmimic.tool_commands import add_tools
 from lessmimic.train_commands import add_train
 from pipeline.errors import INTERRUPTED, SUBJECT_HEIGHT_M, InputError, os_error_line
@@ -64,6 +65,7 @@ def _cmd_retarget(a: argparse.Namespace) -> int:
         raise InputError(
             a.height, "--height", "must be the subject's height in metres, within {:g}-{:g}".format(*SUBJECT_HEIGHT_M)
         )
+    read = _read_options(a)
     variants = parse_variants(a.augment_scales, a.augment_shapes) if a.augment_scales else ()
     report = retarget(
         a.input,
@@ -74,6 +76,7 @@ def _cmd_retarget(a: argparse.Namespace) -> int:
         body_model=a.body_model,
         height_override=a.height,
         variants=variants,
+        read=read,
     )
     if report.get("up_to_date"):
         print(up_to_date_line("retarget", a.name, "retargeted"))
@@ -85,6 +88,8 @@ def _cmd_retarget(a: argparse.Namespace) -> int:
     print(f"retargeted {len(report['clips'])} clip(s), {len(report['failed'])} failed -> datasets/{a.name}/retargeted/")
     if report.get("not_applicable"):
         print(f"  {len(report['not_applicable'])} variant(s) not applicable (reasons in report.json)")
+    if report.get("warnings"):  # each printed once on stderr as it was read
+        print(f"  {len(report['warnings'])} warning(s) about the input, read as it is (listed in report.json)")
     for k in (
         "object_penetration_frac_1cm",
         "ground_penetration_frac_1cm",
@@ -97,6 +102,22 @@ def _cmd_retarget(a: argparse.Namespace) -> int:
         if k in s:
             print(f"  {k}: {s[k]:.4g}")
     return 0
+
+
+def _read_options(a: argparse.Namespace) -> dict:
+    """The readers' options of ``retarget`` (``--fps``, ``--units``, ``--object-mesh``), checked before any work: they
+    apply to mocap files only, a rate is positive, a mesh readable (:func:`pipeline.collision_mesh.load_mesh`)."""
+    read = {"fps": a.fps, "units": a.units, "mesh": a.object_mesh}
+    given = [f"--{k.replace('mesh', 'object-mesh')}" for k, v in read.items() if v is not None]
+    if given and (a.input is None or a.input.startswith("synthetic:")):
+        raise InputError(a.input or "embedded synthetic default", given[0], "applies to mocap files, not this input")
+    if a.fps is not None and not (math.isfinite(a.fps) and a.fps > 0):
+        raise InputError(a.fps, "--fps", "must be a positive frame rate in Hz")
+    if a.object_mesh is not None:
+        from pipeline.collision_mesh import load_mesh
+
+        load_mesh(a.object_mesh)
+    return read
 
 
 def _cmd_import(a: argparse.Namespace) -> int:
@@ -172,26 +193,6 @@ def _counts(counter: dict) -> str:
     return ", ".join(f"{k}: {v}" for k, v in counter.items())
 
 
-def _cmd_physicalize_residual(a: argparse.Namespace) -> int:
-    from physicalize.residual import ResidualConfig, train_residual
-    from pipeline.dataset.clips import episodes_to_robot_clips
-    from pipeline.stage.paths import stage_dir
-
-    src = stage_dir(a.name, "retargeted")
-    if not (src / "meta" / "info.json").is_file():
-        raise InputError(
-            src, "meta/info.json", "no retargeted dataset here: run `lessmimic retarget --name NAME` first"
-        )
-    clips = episodes_to_robot_clips(src)
-    if not 0 <= a.episode < len(clips):
-        raise InputError(src, "--episode", f"episode {a.episode} out of range: the dataset has {len(clips)} episode(s)")
-    cfg = ResidualConfig(profile=a.profile)
-    out = train_residual(clips[a.episode], a.iterations, a.envs, a.seed, Path(a.out), config=cfg, verbose=True)
-    print(f"residual trained on {clips[a.episode].source} ({a.iterations} iterations x {a.envs} envs) -> {out}")
-    print(f"use it: lessmimic physicalize --name {a.name} --teacher base+residual:{out}")
-    return 0
-
-
 def _cmd_features(a: argparse.Namespace) -> int:
     from features.compute import FeatureConfig
     from features.stage import run_stage
@@ -229,6 +230,25 @@ def _add_retarget(sub) -> None:
         type=float,
         default=None,
         help="subject height override in metres, 0.5-2.5 (a subject outside 1.0-2.3 m needs it)",
+    )
+    p.add_argument(
+        "--fps",
+        type=float,
+        default=None,
+        help="frame rate in Hz of input files that carry none (keypoints CSV without a time column, keypoints .npz "
+        "without fps) and the sampling rate of MCAP streams; files with their own rate keep it",
+    )
+    p.add_argument(
+        "--units",
+        default=None,
+        choices=("auto", "m", "cm", "mm", "inch"),
+        help="units of input files that do not say: BVH (default auto: guessed from the subject's height) and "
+        "keypoints (default m, or the .npz's own)",
+    )
+    p.add_argument(
+        "--object-mesh",
+        default=None,
+        help="the object's mesh for OMOMO .pt input (default: <object>.obj beside it, by the file's name)",
     )
     p.add_argument(
         "--augment-scales",
@@ -312,30 +332,12 @@ def _add_features(sub) -> None:
     p.set_defaults(func=_cmd_features, writes="name")
 
 
-def _add_residual(sub) -> None:
-    p = sub.add_parser(
-        "physicalize-residual",
-        help="train the physicalize teacher's learned residual (PPO, CPU) on one retargeted clip",
-    )
-    p.add_argument(
-        "--name", default="default", help="dataset name: trains on datasets/<NAME>/retargeted/ (default: default)"
-    )
-    p.add_argument("--episode", type=int, default=0, help="episode index of the clip to train on (default 0)")
-    p.add_argument("--iterations", type=int, default=20, help="PPO iterations (default 20: smoke scale)")
-    p.add_argument("--envs", type=int, default=8, help="parallel simulated environments (default 8)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--profile", default="mjlab", help="actuator profile (default mjlab)")
-    p.add_argument("--out", required=True, help="checkpoint path (.pt)")
-    # it reads datasets/<NAME>/retargeted/ (and `make train-residual` writes its checkpoint there): one writer at a time
-    p.set_defaults(func=_cmd_physicalize_residual, writes="name")
-
-
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="lessmimic", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     sub = ap.add_subparsers(dest="command", required=True)
-    stages = (_add_retarget, _add_import, _add_physicalize, _add_residual, _add_features)
+    stages = (_add_retarget, _add_import, _add_physicalize, add_residual, _add_features)
     for add in (*stages, add_train, add_corpus, add_tools, add_export_motion):
         add(sub)
     return ap

@@ -30,7 +30,7 @@ def _cmd_inspect(a: argparse.Namespace) -> int:
         geometry = MeshGeometry(a.object_mesh) if a.object_mesh else None
         print(write_robot_log(read_robot_clip(src, object_geometry=geometry), out))
         return 0
-    clips = read_clips(src, body_model=a.body_model)
+    clips = read_clips(src, body_model=a.body_model, fps=a.fps, units=a.units, mesh=a.object_mesh)
     for i, c in enumerate(clips):
         print(write_human_log(c, out if len(clips) == 1 else out.with_name(f"{out.stem}_{i:03d}.mcap")))
     return 0
@@ -79,10 +79,23 @@ def _cmd_publish(a: argparse.Namespace) -> int:
     return 0
 
 
+def merge_lock_folder(out: Path) -> Path:
+    """The folder whose writer lock a merge into ``out`` holds: ``datasets/<NAME>/`` when ``out`` lies in one (the
+    lock every writer of NAME holds: :mod:`pipeline.stage.lock`), else the folder holding ``out``."""
+    from pipeline.stage.paths import datasets_root
+
+    root, target = datasets_root().resolve(), out.resolve()
+    parts = target.relative_to(root).parts if target.is_relative_to(root) else ()
+    return root / parts[0] if len(parts) >= 2 else target.parent
+
+
 def _cmd_merge(a: argparse.Namespace) -> int:
     from pipeline.dataset.merge import merge_datasets
+    from pipeline.stage.lock import dataset_lock
 
-    print(merge_datasets([Path(r) for r in a.shards], out_path(a.out), a.repo_id, overwrite=a.overwrite))
+    out = out_path(a.out)
+    with dataset_lock(merge_lock_folder(out)):  # one writer per dataset, as every writing command
+        print(merge_datasets([Path(r) for r in a.shards], out, a.repo_id, overwrite=a.overwrite))
     return 0
 
 
@@ -92,9 +105,13 @@ def add_tools(sub) -> None:
     p.add_argument("--out", required=True, help="output .mcap path")
     p.add_argument("--robot", action="store_true", help="the file is a G1 motion (BeyondMimic .npz or GMR .pkl)")
     p.add_argument(
-        "--object-mesh", default=None, help="with --robot: mesh of the object the motion file carries poses for"
+        "--object-mesh",
+        default=None,
+        help="mesh of the object the file carries poses for (a human OMOMO .pt: default <object>.obj beside it)",
     )
     p.add_argument("--body-model", default=None)
+    p.add_argument("--fps", type=float, default=None, help="frame rate of a file that carries none (as retarget's)")
+    p.add_argument("--units", default=None, choices=("auto", "m", "cm", "mm", "inch"), help="as retarget's --units")
     p.set_defaults(func=_cmd_inspect)
     p = sub.add_parser(
         "evaluate-retarget",

@@ -57,6 +57,17 @@ def load_mesh(path: str) -> trimesh.Trimesh:
     return mesh
 
 
+def check_meshes(clips) -> None:
+    """Every object mesh the clips (human or robot) name loads (:func:`load_mesh`): a stage calls it on its input
+    before any work, so a folder, a missing or a degenerate mesh is its one line before the work, not after."""
+    from pipeline.geometry import MeshGeometry
+
+    for path in dict.fromkeys(
+        o.geometry.path for c in clips for o in c.objects if isinstance(o.geometry, MeshGeometry)
+    ):
+        load_mesh(path)
+
+
 def _file_digest(path: str) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 

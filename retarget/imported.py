@@ -21,6 +21,7 @@ import mujoco
 import numpy as np
 
 from pipeline.clip import RobotClip
+from pipeline.collision_mesh import check_meshes
 from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.clips import robot_clips_to_episodes
 from pipeline.dataset.objects import objects_note
@@ -111,6 +112,7 @@ def run_stage(
     if not overwrite and (done := run.finished()) is not None:
         return {**done, "up_to_date": True}
     clips = read_robot_clips(input_path, object_geometry=geometry)  # bad input fails before the output is claimed
+    check_meshes(clips)
     if object_mass is not None:  # motion files carry no masses (default: pipeline.geometry.ObjectPhysics)
         clips = [replace(c, objects=tuple(replace(o, mass=object_mass) for o in c.objects)) for c in clips]
     run.begin(overwrite)

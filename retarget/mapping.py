@@ -286,5 +286,5 @@ def load_mapping(skeleton: Skeleton, explicit: str | None = None, *, source: str
         "skeleton",
         f"no joint mapping fits this skeleton; it has {len(names)} joints: "
         f"{', '.join(skeleton.joint_names)}; tried {'; '.join(tried)}; add a mapping file to "
-        f"{MAPPINGS_DIR} or pass one explicitly",
+        f"{MAPPINGS_DIR} (every file there is tried; the command line has no option naming one)",
     )

@@ -114,7 +114,7 @@ def subject_height(clip: HumanClip, override: float | None = None) -> tuple[floa
     outside 1.0-2.3 m without an override is an :class:`InputError`."""
     if override is not None:
         if not np.isfinite(override) or override <= 0:
-            raise InputError(clip.source, "height_override", f"must be a positive height in metres, got {override!r}")
+            raise InputError(clip.source, "--height", f"must be a positive height in metres, got {override!r}")
         return float(override), "override"
     h, src = clip.subject_height, "clip"
     if h is None:
@@ -123,15 +123,15 @@ def subject_height(clip: HumanClip, override: float | None = None) -> tuple[floa
         raise InputError(
             clip.source,
             "subject_height",
-            "unknown (none in the clip, no head/ankle joints to estimate it); pass height_override",
+            "unknown (none in the clip, no head/ankle joints to estimate it); pass --height M (the subject's height)",
         )
     lo, hi = HEIGHT_RANGE
     if not lo <= h <= hi:
         raise InputError(
             clip.source,
             "subject_height",
-            f"{h:.3f} m ({src}) is outside {lo}-{hi} m (wrong units?); "
-            "pass height_override if the subject really is that tall",
+            f"{h:.3f} m ({src}) is outside {lo}-{hi} m (wrong units? --units); "
+            "pass --height M if the subject really is that tall",
         )
     return float(h), src
 

@@ -32,6 +32,7 @@ from pipeline.stage.inspect_log import write_robot_log
 from pipeline.stage.paths import file_stem, stage_dir
 from pipeline.stage.run import StageRun, digest
 from pipeline.stage.state import files_fingerprint, fingerprint
+from pipeline.suspicious import collecting
 from retarget.augment import Variant
 from retarget.augment import not_applicable as augment_not_applicable
 from retarget.clip import FPS, METHOD, retarget_clip
@@ -179,7 +180,8 @@ def run_stage(
         return {**done, "up_to_date": True}
     run.check(overwrite)
     t0 = time.perf_counter()
-    clips = list(human())
+    with collecting() as suspicious:  # what the input has that is only suspicious: in the report (pipeline.suspicious)
+        clips = list(human())
     run.begin(overwrite)
     retarget = partial(retarget_one, height_override=height_override)
     items, skipped = work_items(clips, variants)
@@ -204,6 +206,7 @@ def run_stage(
         ],
         "failed": failed,
         "summary": summarise([r.metrics for r in done]) if done else {},
+        "warnings": suspicious,
     }
     if variants:
         report["variants"] = {

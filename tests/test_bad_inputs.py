@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 
+from ingest.default_input import default_clips
 from lessmimic.cli import main
 
 HEADER = """HIERARCHY
@@ -38,12 +39,59 @@ MOTION
 ROW = "{x} 100 20 30 20 {r} 90 40 15"
 
 
-def _bvh(folder: Path, xs, rs=None, name="take.bvh") -> Path:
+def _bvh(folder: Path, xs, rs=None, name="take.bvh", sideways=False) -> Path:
+    """A two-joint BVH at 30 Hz; ``sideways``: its rest pose lies flat and it has no head or ankle, so its units
+    cannot be guessed."""
     rs = rs if rs is not None else [10] * len(xs)
     rows = "".join(ROW.format(x=x, r=r) + "\n" for x, r in zip(xs, rs))
     path = folder / name
-    path.write_text(HEADER + f"Frames: {len(xs)}\nFrame Time: 0.0333333\n" + rows)
+    header = HEADER.replace("OFFSET 0 50 0", "OFFSET 50 0 0") if sideways else HEADER
+    path.write_text(header + f"Frames: {len(xs)}\nFrame Time: 0.0333333\n" + rows)
     return path
+
+
+def _keypoints_csv(folder: Path, *, drop=(), lurch_cm=0.0, name="take.csv") -> Path:
+    """The default PickUp's first 40 frames of joints as a keypoints CSV in centimetres with no time column (no rate,
+    and metres assumed: the file says neither); ``lurch_cm``: every joint moved that far along x from frame 20 on."""
+    clip = next(c for c in default_clips() if c.task == "PickUp")
+    names = [n for n in clip.skeleton.joint_names if n not in drop]
+    pos = clip.joint_pos[:40, [clip.skeleton.joint_names.index(n) for n in names]] * 100.0
+    pos[20:, :, 0] += lurch_cm
+    rows = [",".join(f"{n}_{a}" for n in names for a in "xyz")] + [",".join(f"{v:.4f}" for v in p.ravel()) for p in pos]
+    path = folder / name
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def _c3d_blank_labels(folder: Path) -> Path:
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [100.0]
+    c["parameters"]["POINT"]["LABELS"]["value"] = ("", "")
+    c["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
+    data = np.ones((4, 2, 30))
+    data[2] = 1000.0
+    c["data"]["points"] = data
+    path = folder / "blank.c3d"
+    c.write(str(path))
+    return path
+
+
+def _triangle(folder: Path) -> Path:
+    path = folder / "triangle.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    return path
+
+
+def _no_objects(folder: Path) -> None:
+    """datasets/bare/physicalized/: a physicalized dataset of one clip with no object track."""
+    from pipeline.clip import RobotClip
+    from pipeline.dataset.clips import robot_clips_to_episodes
+    from pipeline.dataset.write import write_dataset
+    from pipeline.robot import actuator_profile, default_qpos
+
+    qpos = default_qpos(actuator_profile("mjlab"))[None].repeat(10, 0)
+    features, episodes = robot_clips_to_episodes([RobotClip(qpos, 50, "hand-made:stand", task="stand")])
+    write_dataset(folder.parent / "datasets" / "bare" / "physicalized", "lessmimic/bare", 50, features, episodes)
 
 
 def _c3d_cut(folder: Path) -> Path:
@@ -107,6 +155,38 @@ CASES = [
         "--out: its folder",
     ),  # fmt: skip
     ("load offline", lambda d: ["load", "owner/repo"], 2, "owner/repo: hub: not downloaded here"),
+    (
+        "--object-mesh a folder",
+        lambda d: ["retarget", "--input", str(_bvh(d, [0, 1])), "--object-mesh", str(d)],
+        2,
+        "inputs: mesh: is a folder; give the object's mesh file",
+    ),
+    (
+        "a one-triangle mesh",
+        lambda d: ["retarget", "--input", str(_bvh(d, [0, 1])), "--object-mesh", str(_triangle(d))],
+        2,
+        "triangle.obj: mesh: has 3 vertices: too few to enclose a volume",
+    ),
+    ("--fps 0", lambda d: ["retarget", "--input", str(_bvh(d, [0, 1])), "--fps", "0"], 2, "--fps: must be a positive"),
+    ("--units on the synthetic input", lambda d: ["retarget", "--units", "cm"], 2, "--units: applies to mocap files"),
+    (
+        "a CSV with no rate",
+        lambda d: ["retarget", "--input", str(_keypoints_csv(d))],
+        2,
+        "take.csv: fps: no time column; pass --fps N$",
+    ),
+    (
+        "a BVH whose units cannot be guessed",
+        lambda d: ["retarget", "--input", str(_bvh(d, [0, 1], sideways=True))],
+        2,
+        "take.bvh: units: cannot guess units .*; pass --units m \\(or cm, mm, inch\\)$",
+    ),
+    (
+        "a dataset with no object tracks",
+        lambda d: _no_objects(d) or ["features", "--name", "bare"],
+        2,
+        "bare/physicalized: objects: the dataset has no object tracks",
+    ),
     ("verify a missing folder", lambda d: ["verify", "/nonexistent/x"], 2, "is not a dataset folder"),
 ]
 
@@ -200,3 +280,58 @@ def test_features_on_a_physicalized_dataset_without_its_info_names_it(tmp_path, 
     err = capsys.readouterr().err.strip()
     assert err == f"error: {root}: meta/info.json: missing (the checksums list it): the dataset is incomplete"
     assert _tree(tmp_path) == before
+
+
+# Issue 55, case 4: a clip that fails only in the retargeting (after it was read) leaves nothing either: exit 1, its
+# one error line and "retargeted nothing", no human/, no logs, no .work, no lock.
+PER_CLIP = [
+    ("a 1-frame BVH", lambda d: ["--input", str(_bvh(d, [0]))], "take.bvh: frames: a clip needs at least 2 frames"),
+    ("blank C3D labels", lambda d: ["--input", str(_c3d_blank_labels(d))], "blank.c3d: skeleton: no joint mapping"),
+    (
+        "a keypoints CSV with no head",
+        lambda d: ["--input", str(_keypoints_csv(d, drop=("head",))), "--fps", "30", "--units", "cm"],
+        "take.csv: skeleton: no joint mapping fits this skeleton",
+    ),
+]
+
+
+@pytest.mark.parametrize("case, argv, error", PER_CLIP, ids=[c[0] for c in PER_CLIP])
+def test_a_clip_failing_in_the_retargeting_leaves_nothing(case, argv, error, tmp_path, monkeypatch, capsys):
+    root, inputs = tmp_path / "datasets", tmp_path / "inputs"
+    root.mkdir()
+    inputs.mkdir()
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(root))
+    monkeypatch.chdir(tmp_path)
+    args = ["retarget", *argv(inputs)]
+    before = _tree(tmp_path)
+    assert main(args) == 1
+    captured = capsys.readouterr()
+    lines = [ln for ln in captured.out.splitlines() if ln.startswith(("error: ", "retargeted "))]
+    assert len(lines) == 2 and re.search(error, lines[0]), lines
+    assert lines[1] == "retargeted nothing: every clip failed (1); datasets/default/ is left as it was"
+    assert "error" not in captured.err
+    assert _tree(tmp_path) == before
+
+
+def test_the_stages_check_before_they_claim_their_output(tmp_path, monkeypatch):
+    """Issue 55, case 4: without the command line's undo, the stage itself refuses a dataset with no object tracks
+    (features) and a mesh that is a folder or one triangle (import) before it writes its resume record."""
+    from features.stage import run_stage as features
+    from pipeline.errors import InputError
+
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path / "datasets"))
+    _no_objects(tmp_path / "inputs")
+    before = _tree(tmp_path)
+    with pytest.raises(InputError, match="objects: the dataset has no object tracks"):
+        features("bare")
+    assert _tree(tmp_path) == before  # no .work/features/run.json, no logs/features/
+    if not SHARED_MOCAP.is_dir():
+        return
+    from retarget.imported import run_stage as import_stage
+
+    npz = SHARED_MOCAP / "omniretarget" / "sub3_largebox_003_mj_w_obj.npz"
+    for mesh, error in ((tmp_path, "mesh: is a folder"), (_triangle(tmp_path), "has 3 vertices")):
+        before = _tree(tmp_path)
+        with pytest.raises(InputError, match=error):
+            import_stage(str(npz), "x", object_mesh=str(mesh))
+        assert _tree(tmp_path) == before

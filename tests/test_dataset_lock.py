@@ -117,3 +117,42 @@ def test_the_lock_is_reentrant_and_leaves_nothing(tmp_path):
         with dataset_lock(folder):
             raise RuntimeError
     assert not (tmp_path / "root").exists()
+
+
+def _shard(root: Path) -> Path:
+    from pipeline.clip import RobotClip
+    from pipeline.dataset.clips import robot_clips_to_episodes
+    from pipeline.dataset.write import write_dataset
+    from pipeline.robot import actuator_profile, default_qpos
+
+    qpos = default_qpos(actuator_profile("mjlab"))[None].repeat(10, 0)
+    features, episodes = robot_clips_to_episodes([RobotClip(qpos, 50, "hand-made:stand", task="stand")])
+    return write_dataset(root, "lessmimic/shard", 50, features, episodes)
+
+
+def test_merge_holds_the_writer_lock_of_its_output(tmp_path):
+    """Issue 55, part 1: ``merge --out datasets/<NAME>/...`` is a writer of NAME like every other; outside the datasets
+    root it holds the lock of the folder it writes into."""
+    shard = _shard(tmp_path / "shards" / "a")
+    holder = _holder(tmp_path / "x")
+    try:
+        out = tmp_path / "x" / "merged"
+        held = _cli(tmp_path, "merge", str(shard), "--out", str(out), "--repo-id", "lessmimic/merged")
+        assert held.returncode == 2 and held.stderr.strip().startswith(
+            f"error: {tmp_path / 'x'}: lock: held by pid {holder.pid} (holder, since "
+        ), held.stderr
+        assert "\n" not in held.stderr.strip() and not out.exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    assert _cli(tmp_path, "merge", str(shard), "--out", str(out), "--repo-id", "lessmimic/merged").returncode == 0
+    assert (out / "meta" / "info.json").is_file() and not (tmp_path / "x" / LOCK_NAME).exists()
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    holder = _holder(outside)
+    try:
+        held = _cli(tmp_path, "merge", str(shard), "--out", str(outside / "m"), "--repo-id", "lessmimic/merged")
+        assert held.returncode == 2 and f"error: {outside}: lock: held by pid {holder.pid}" in held.stderr
+    finally:
+        holder.kill()
+        holder.wait()

@@ -101,7 +101,8 @@ def test_bad_keypoint_files(tmp_path):
     expect_input_error(lambda: read_keypoints_csv(s), tmp_path, file=s, field="joint_pos[spine]", frame=1, match="NaN")
     no_time = [HEADER.replace("time,", "")] + [",".join(x.split(",")[:1] + x.split(",")[2:]) for x in _rows()]
     u = _csv(tmp_path, no_time, "nofps.csv")
-    expect_input_error(lambda: read_keypoints_csv(u), tmp_path, file=u, field="fps", match="pass fps=")
+    expect_input_error(lambda: read_keypoints_csv(u), tmp_path, file=u, field="fps", match="pass --fps N")
+    assert read_keypoints_csv(u, fps=30).fps == 30  # what lessmimic retarget --fps 30 passes
     v = _csv(tmp_path, ["frame,head_x,head_y"] + ["0,1,2"], "header.csv")
     expect_input_error(lambda: read_keypoints_csv(v, fps=30), tmp_path, file=v, field="header")
 
@@ -119,5 +120,6 @@ def test_csv_time_column_must_increase_uniformly(tmp_path):
     rows[4] = ",".join(cells)
     q = _csv(tmp_path, [HEADER] + rows, "gap.csv")
     expect_input_error(lambda: read_keypoints_csv(q), tmp_path, file=q, field="time", match="not uniformly sampled")
+    assert read_keypoints_csv(q, fps=100).fps == 100  # --fps N: the rows read at N Hz, as the message says
     one = _csv(tmp_path, [HEADER] + _rows(1), "one.csv")
     expect_input_error(lambda: read_keypoints_csv(one), tmp_path, file=one, field="time", match="at least two rows")

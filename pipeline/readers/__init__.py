@@ -28,8 +28,12 @@ transform stream (e.g. inspection logs). Any other problem in a clip is an error
 truncated or corrupt ``.npz`` is a one-line :class:`~pipeline.errors.InputError` naming it
 (:func:`~pipeline.readers.keypoints.open_npz`, through which every ``.npz`` reader opens its file).
 
-``fps`` is a fallback rate for files that carry none (CSV without a ``time`` column, keypoint
-``.npz`` without ``fps``) and the sampling rate of MCAP streams; files with their own rate keep it.
+``fps`` is a fallback rate for files that carry none (CSV without a ``time`` column, or with one not uniformly
+sampled, keypoint ``.npz`` without ``fps``) and the sampling rate of MCAP streams; files with their own rate keep it.
+``units`` (``auto``, ``m``, ``cm``, ``mm``, ``inch``) are those of files that do not say: BVH (default: guessed from the
+subject's height) and keypoints (default: metres, or the ``.npz``'s ``units``); the other formats carry theirs.
+``mesh`` is the object mesh of an OMOMO ``.pt`` (default: found beside it by the file's name). The command line's
+``lessmimic retarget --fps N --units U --object-mesh PATH`` pass them.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ from pipeline.clip import HumanClip, RobotClip
 from pipeline.errors import InputError
 from pipeline.geometry import ObjectGeometry
 from pipeline.readers.keypoints import open_npz
+from pipeline.suspicious import SUSPICIOUS_ROOT_SPEED_MPS, check_height, suspect
 
 HUMAN_SUFFIXES = (".bvh", ".pt", ".npz", ".c3d", ".mcap", ".csv")
 ROBOT_SUFFIXES = (".npz", ".pkl", ".csv")
@@ -89,31 +94,49 @@ MAX_ROOT_SPEED_MPS = 15.0
 
 def check_root_speed(clip: HumanClip, path: str | Path) -> HumanClip:
     """``clip``, or an :class:`InputError` naming the first frame whose root moved faster than
-    :data:`MAX_ROOT_SPEED_MPS` since the frame before."""
+    :data:`MAX_ROOT_SPEED_MPS` since the frame before; faster than
+    :data:`~pipeline.suspicious.SUSPICIOUS_ROOT_SPEED_MPS` is a warning (:func:`pipeline.suspicious.suspect`)."""
     root = int(np.flatnonzero(np.asarray(clip.skeleton.parents) < 0)[0])
     speed = np.linalg.norm(np.diff(clip.joint_pos[:, root], axis=0), axis=1) * clip.fps
+    name = clip.skeleton.joint_names[root]
     if (speed > MAX_ROOT_SPEED_MPS).any():
         k = int(np.flatnonzero(speed > MAX_ROOT_SPEED_MPS)[0])
-        name = clip.skeleton.joint_names[root]
-        why = f"moves {speed[k]:.4g} m/s since the frame before (above {MAX_ROOT_SPEED_MPS:g} m/s): a jump, not motion"
+        why = (
+            f"moves {speed[k]:.4g} m/s since the frame before (above {MAX_ROOT_SPEED_MPS:g} m/s): a jump or a wrong "
+            "unit (--units), not motion"
+        )
         raise InputError(path, f"{name} position", why, frame=k + 1)
+    if (fast := speed > SUSPICIOUS_ROOT_SPEED_MPS).any():
+        k = int(np.flatnonzero(fast)[0])
+        why = (
+            f"moves {speed[k]:.4g} m/s since the frame before ({int(fast.sum())} frame(s) above "
+            f"{SUSPICIOUS_ROOT_SPEED_MPS:g} m/s, a run); read as it is"
+        )
+        suspect(path, f"{name} position", why, frame=k + 1)
     return clip
 
 
 def read_clip(
-    path: str | Path, *, body_model: str | Path | None = None, fps: float | None = None, mesh: str | Path | None = None
+    path: str | Path,
+    *,
+    body_model: str | Path | None = None,
+    fps: float | None = None,
+    mesh: str | Path | None = None,
+    units: str | None = None,
 ) -> HumanClip:
     """One human clip file, dispatched by suffix (see the module doc); its root's speed checked
-    (:func:`check_root_speed`)."""
-    return check_root_speed(_read_clip(Path(path), body_model, fps, mesh), path)
+    (:func:`check_root_speed`), its stated height against its joints' (:func:`pipeline.suspicious.check_height`)."""
+    clip = check_root_speed(_read_clip(Path(path), body_model, fps, mesh, units), path)
+    check_height(clip, path)
+    return clip
 
 
-def _read_clip(path: Path, body_model, fps, mesh) -> HumanClip:
+def _read_clip(path: Path, body_model, fps, mesh, units) -> HumanClip:
     suffix = path.suffix.lower()
     if suffix == ".bvh":
         from pipeline.readers.bvh import read_bvh
 
-        return read_bvh(path)
+        return read_bvh(path, units=units or "auto")
     if suffix == ".pt":
         from pipeline.readers.omomo import read_omomo
 
@@ -136,15 +159,15 @@ def _read_clip(path: Path, body_model, fps, mesh) -> HumanClip:
                 "36 numbers a row and no header: a G1 robot motion (Unitree CSV), not a human clip: read it with "
                 "read_robot_clip",
             )
-        return read_keypoints_csv(path, fps=fps)
+        return read_keypoints_csv(path, fps=fps, units=units or "m")
     if suffix == ".npz":
-        return _read_npz(path, body_model, fps)
+        return _read_npz(path, body_model, fps, units)
     raise InputError(
         path, "suffix", f"unknown clip format {path.suffix or '(none)'!r}; expected one of {', '.join(HUMAN_SUFFIXES)}"
     )
 
 
-def _read_npz(path: Path, body_model, fps) -> HumanClip:
+def _read_npz(path: Path, body_model, fps, units) -> HumanClip:
     kind = npz_kind(path)
     if kind == "amass":
         from pipeline.readers.amass import read_amass
@@ -153,7 +176,7 @@ def _read_npz(path: Path, body_model, fps) -> HumanClip:
     if kind == "keypoints":
         from pipeline.readers.keypoints import read_keypoints_npz
 
-        return read_keypoints_npz(path, fps=fps)
+        return read_keypoints_npz(path, fps=fps, units=units)
     if kind == "robot":
         raise _NotHuman(
             path,
@@ -173,20 +196,26 @@ def _candidates(folder: Path) -> list[Path]:
 
 
 def read_clips(
-    path: str | Path, *, body_model: str | Path | None = None, fps: float | None = None, mesh: str | Path | None = None
+    path: str | Path,
+    *,
+    body_model: str | Path | None = None,
+    fps: float | None = None,
+    mesh: str | Path | None = None,
+    units: str | None = None,
 ) -> list[HumanClip]:
     """Every human clip in ``path`` (a file, or a folder searched one level deep)."""
     path = Path(path)
+    options = {"body_model": body_model, "fps": fps, "mesh": mesh, "units": units}
     if not path.exists():
         raise InputError(path, "input", "does not exist")
     if path.is_file():
-        return [read_clip(path, body_model=body_model, fps=fps, mesh=mesh)]
+        return [read_clip(path, **options)]
     if not path.is_dir():
         raise InputError(path, "input", "is neither a file nor a folder (a FIFO or a device?)")
     clips = []
     for p in _candidates(path):
         try:
-            clips.append(read_clip(p, body_model=body_model, fps=fps, mesh=mesh))
+            clips.append(read_clip(p, **options))
         except _NotHuman:
             continue
         except InputError as e:

@@ -35,6 +35,7 @@ from pipeline.clip import HumanClip, Skeleton
 from pipeline.errors import InputError
 from pipeline.readers.keypoints import guess_units, unit_scale, up_matrix
 from pipeline.rotations import wxyz_from_rotation
+from pipeline.suspicious import suspect
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 
@@ -195,21 +196,28 @@ def parse_bvh(path: str | Path) -> BvhData:
 
 
 MAX_ROTATION_DEG = 720.0  # +-4 pi: an Euler angle beyond two full turns is no pose a joint takes, but a broken file
+SUSPICIOUS_ROTATION_DEG = 360.0  # beyond a full turn: some exporters unwrap angles so, but rarely that far
 
 
 def _check_rotations(nodes: list[_Node], motion: np.ndarray, src: str) -> None:
     """An Euler angle beyond +-:data:`MAX_ROTATION_DEG` is an :class:`InputError` naming the joint, channel and
-    frame (read on, it wraps to an arbitrary pose without a word)."""
+    frame (read on, it wraps to an arbitrary pose without a word); one beyond +-:data:`SUSPICIOUS_ROTATION_DEG` is a
+    warning (:func:`pipeline.suspicious.suspect`)."""
     owners = [(n.name, ch) for n in nodes for ch in n.channels]
     rot = np.array([ch.endswith("rotation") for _, ch in owners], dtype=bool)
-    bad = np.zeros_like(motion, dtype=bool)
-    bad[:, rot] = np.abs(motion[:, rot]) > MAX_ROTATION_DEG
-    if bad.any():
+    for limit in (MAX_ROTATION_DEG, SUSPICIOUS_ROTATION_DEG):
+        bad = np.zeros_like(motion, dtype=bool)
+        bad[:, rot] = np.abs(motion[:, rot]) > limit
+        if not bad.any():
+            continue
         k = int(np.flatnonzero(bad.any(axis=1))[0])
         c = int(np.flatnonzero(bad[k])[0])
         name, ch = owners[c]
-        why = f"{motion[k, c]:.6g} degrees is beyond +-{MAX_ROTATION_DEG:g} (two full turns): not a joint angle"
-        raise InputError(src, f"{name}.{ch}", why, frame=k)
+        if limit == MAX_ROTATION_DEG:
+            why = f"{motion[k, c]:.6g} degrees is beyond +-{MAX_ROTATION_DEG:g} (two full turns): not a joint angle"
+            raise InputError(src, f"{name}.{ch}", why, frame=k)
+        why = f"{motion[k, c]:.6g} degrees is beyond +-{limit:g} (a full turn; {int(bad.sum())} value(s)): read as is"
+        suspect(src, f"{name}.{ch}", why, frame=k)
 
 
 def forward_kinematics(data: BvhData, rest: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -295,7 +303,9 @@ def read_bvh(
     if units == "auto":
         if raw_height is None:
             raise InputError(
-                src, "units", "cannot guess units (no upright rest pose, no head/ankle joints); pass units="
+                src,
+                "units",
+                "cannot guess units (no upright rest pose, no head/ankle joints); pass --units m (or cm, mm, inch)",
             )
         units = guess_units(raw_height)
     s = unit_scale(units, src)

@@ -20,7 +20,6 @@
 from __future__ import annotations
 
 import struct
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +28,7 @@ from pipeline.clip import HumanClip, Skeleton
 from pipeline.errors import InputError
 from pipeline.foot_contact import runs
 from pipeline.readers.keypoints import UNIT_SCALE, up_matrix
+from pipeline.suspicious import suspect
 
 _UNITS = {"mm": "mm", "millimeters": "mm", "cm": "cm", "m": "m", "meters": "m"}
 
@@ -136,7 +136,7 @@ def read_c3d(path: str | Path, *, up: str = "auto", max_gap: float = 0.25, long_
         keep.append(m)
     if long_runs:
         what = "dropped markers with" if long_gaps == "drop" else "interpolated"
-        warnings.warn(f"{src}: {what} gaps longer than {max_gap} s: {', '.join(long_runs)}", UserWarning, stacklevel=2)
+        suspect(src, "markers", f"{what} gaps longer than {max_gap} s: {', '.join(long_runs)}")
     if not keep:
         raise InputError(src, "markers", "every marker was dropped for long gaps")
     pos = xyz[:, keep] * UNIT_SCALE[_UNITS[unit_name]] @ up_matrix(_up(c, up, src), src).T

@@ -126,7 +126,7 @@ def keypoints_clip(
         raw = estimate_height(pos, skeleton)
         if raw is None:
             raise InputError(
-                source, "units", "cannot guess units without head/ankle joints; pass units='m' (or cm, mm, inch)"
+                source, "units", "cannot guess units without head/ankle joints; pass --units m (or cm, mm, inch)"
             )
         units = guess_units(raw)
     pos = pos * unit_scale(units, source)
@@ -191,8 +191,11 @@ def _npz_str(d: dict, key: str, default: str) -> str:
     return str(d[key].item()) if key in d else default
 
 
-def read_keypoints_npz(path: str | Path, *, fps: float | None = None, subject_height: float | None = None) -> HumanClip:
-    """A keypoints ``.npz`` (see the module doc) as a z-up metre :class:`HumanClip`."""
+def read_keypoints_npz(
+    path: str | Path, *, fps: float | None = None, units: str | None = None, subject_height: float | None = None
+) -> HumanClip:
+    """A keypoints ``.npz`` (see the module doc) as a z-up metre :class:`HumanClip`; ``fps`` and ``units`` are used
+    where the file holds none (default units: metres)."""
     src = str(path)
     d, skipped = load_npz(path)
     key = "joint_pos" if "joint_pos" in d else "positions" if "positions" in d else None
@@ -205,10 +208,10 @@ def read_keypoints_npz(path: str | Path, *, fps: float | None = None, subject_he
     parents = np.asarray(d["parents"]).astype(int).reshape(-1).tolist() if "parents" in d else [-1] * len(names)
     rate = float(np.asarray(d["fps"]).reshape(-1)[0]) if "fps" in d else fps
     if rate is None:
-        raise InputError(src, "fps", "missing from the file; pass fps=")
+        raise InputError(src, "fps", "missing from the file; pass --fps N")
     if len(parents) != len(names):
         raise InputError(src, "parents", f"{len(parents)} parents for {len(names)} joint names")
-    units, up = _npz_str(d, "units", "m"), _npz_str(d, "up", "z")
+    units, up = _npz_str(d, "units", units or "m"), _npz_str(d, "up", "z")
     return keypoints_clip(d[key], names, parents, rate, src, units=units, up=up, subject_height=subject_height)
 
 
@@ -233,7 +236,8 @@ def _csv_layout(header: list[str], src: str) -> tuple[list[str], list[int], int 
 def read_keypoints_csv(
     path: str | Path, *, fps: float | None = None, units: str = "m", up: str = "z", subject_height: float | None = None
 ) -> HumanClip:
-    """A keypoints ``.csv`` (see the module doc); ``fps`` is required unless a ``time`` column exists."""
+    """A keypoints ``.csv`` (see the module doc); ``fps`` is required unless a uniformly sampled ``time`` column
+    exists (with a ``time`` column that is not, ``fps`` reads the rows at that rate)."""
     src = str(path)
     with open(path, newline="") as f:
         rows = list(csv.reader(f))
@@ -261,10 +265,12 @@ def read_keypoints_csv(
             raise InputError(
                 src, "time", f"is not increasing ({values[k - 1, time_col]} then {values[k, time_col]})", frame=k
             )
-        if np.ptp(dt) > 0.01 * np.median(dt):
-            raise InputError(src, "time", "is not uniformly sampled (resample to a fixed rate first, or pass fps=)")
-        fps = 1.0 / float(np.median(dt))
+        uniform = np.ptp(dt) <= 0.01 * np.median(dt)
+        if not uniform and fps is None:
+            why = "is not uniformly sampled (resample to a fixed rate first, or pass --fps N to read the rows at N Hz)"
+            raise InputError(src, "time", why)
+        fps = 1.0 / float(np.median(dt)) if uniform else fps
     if fps is None:
-        raise InputError(src, "fps", "no time column; pass fps=")
+        raise InputError(src, "fps", "no time column; pass --fps N")
     pos = np.stack([values[:, s : s + 3] for s in starts], axis=1)
     return keypoints_clip(pos, names, [-1] * len(names), fps, src, units=units, up=up, subject_height=subject_height)

@@ -249,7 +249,7 @@ def _infer_fps(tracks: dict[str, _Track], src: str) -> float:
     busiest = max(tracks.values(), key=lambda tr: len(set(tr.times)))
     dt = np.diff(np.unique(busiest.times))
     if len(dt) == 0:
-        raise InputError(src, "fps", "every frame has a single sample; pass fps=")
+        raise InputError(src, "fps", "every frame has a single sample; pass --fps N")
     fps = 1.0 / float(np.median(dt))
     return float(round(fps)) if abs(fps - round(fps)) < 1e-3 * fps else fps
 

@@ -150,14 +150,15 @@ def parse_name(path: str | Path) -> tuple[str | None, str | None]:
 def find_mesh(path: str | Path, obj: str | None) -> Path:
     src = str(path)
     if obj is None:
-        raise InputError(src, "mesh", "the file name names no object (expected subN_<object>_NNN.pt); pass mesh=PATH")
+        why = "the file name names no object (expected subN_<object>_NNN.pt); pass --object-mesh PATH"
+        raise InputError(src, "mesh", why)
     folder = Path(path).parent
     names = [f"{obj}.obj", f"{obj}_{obj}.obj", f"{obj}/{obj}.obj", f"{obj}_cleaned_simplified.obj"]
     for n in names:
         if (folder / n).is_file():
             return folder / n
     raise InputError(
-        src, "mesh", f"no mesh for object {obj!r} in {folder} (looked for {', '.join(names)}); pass mesh=PATH"
+        src, "mesh", f"no mesh for object {obj!r} in {folder} (looked for {', '.join(names)}); pass --object-mesh PATH"
     )
 
 
