@@ -223,6 +223,18 @@ def test_a_height_dict_height_outside_a_person_is_an_error(height, tmp_path, mon
     assert not (tmp_path / "datasets").exists()
 
 
+@pytest.mark.skipif(not Path("/sys").is_dir(), reason="needs /sys (sysfs: no file can be made in it)")
+def test_an_output_where_nothing_can_be_written_is_one_line_naming_it(tmp_path, monkeypatch, capsys):
+    """Issue 55, case 6: a read-only or /sys output folder was a traceback (then a line naming no file)."""
+    monkeypatch.chdir(tmp_path)
+    bvh = _bvh(tmp_path, [0, 1])
+    before = _tree(tmp_path)
+    assert main(["inspect", str(bvh), "--out", "/sys/lessmimic-x.mcap"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and err.startswith("error: /sys/lessmimic-x.mcap: "), err
+    assert _tree(tmp_path) == before and not Path("/sys/lessmimic-x.mcap").exists()
+
+
 def test_datasets_root_that_is_a_file_is_one_line(tmp_path, monkeypatch, capsys):
     (tmp_path / "file").write_text("")
     monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path / "file"))

@@ -232,6 +232,11 @@ def _atomic_mcap(path: Path, body: Callable[[foxglove.Context], None]) -> Path:
         with foxglove.open_mcap(tmp, allow_overwrite=True, context=ctx):
             body(ctx)
         os.replace(tmp, path)
+    except OSError as exc:  # the MCAP writer's errors name no file: the one line names the one asked for
+        tmp.unlink(missing_ok=True)
+        if exc.filename is not None:
+            raise
+        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
