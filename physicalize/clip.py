@@ -175,14 +175,14 @@ def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, ga
         return None
     index, nominal, before = max(fell, key=lambda x: x[1].fell_at)
     make = partial(WholeBodyController, scene.model, scene.profile, gains[index])
-    budget, spent, children = int(config.children_per_s * ref.frames / clip.fps), 0.0, 0
+    budget, spent, children, frames = beam.frame_budget(config, ref.frames, clip.fps), 0.0, 0, 0
     for attempt in range(config.attempts):
-        share, left = replace(config, seed=config.seed + attempt), budget - children
-        kw = {"contact_links": clip.contact_links, "objects": objects, "max_children": left}
+        share, left = replace(config, seed=config.seed + attempt), budget - frames
+        kw = {"contact_links": clip.contact_links, "objects": objects, "max_frames": left}
         found = beam.search(scene, ref, make, *state0, nominal, share, **kw)
-        spent, children = spent + found.cpu_s, children + found.children
+        spent, children, frames = spent + found.cpu_s, children + found.children, frames + found.frames
         figures = _figures(scene, found.rollout, clip, objects, *state0, None, ref_figures)
-        if figures["valid"] or children >= budget:
+        if figures["valid"] or frames >= budget:
             break
     figures.update(balance_figures(scene.model, ref, found.rollout, gains[index].touch_force))
     figures["search"] = {
@@ -191,6 +191,7 @@ def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, ga
         "segments": [seg.as_dict(clip.fps) for seg in found.segments],
         "attempts": attempt + 1,
         "children": children,
+        "frames": frames,
         "cpu_s": spent,
         "failure_before": before["failure"],
         "failure_after": figures["failure"],

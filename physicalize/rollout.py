@@ -134,6 +134,7 @@ class Tracker:
         self.object_geoms = {g for g in range(m.ngeom) if m.geom_bodyid[g] in set(scene.object_body_id.values())}
         self.rec: dict[str, list] = {k: [] for k in RECORDED}
         self.t, self.fails, self.fell_at = 0, 0, None
+        self.steps = 0  # control frames simulated, restores or not: what a search's budget counts
         self.started = time.perf_counter()
 
     def step(self) -> None:
@@ -167,7 +168,7 @@ class Tracker:
         k = min(t + 1, T - 1)
         if self.fell_at is None and fallen(d, ref.qpos[k, 2], self.torso, ref.torso_quat[k]):
             self.fell_at = t + 1
-        self.t = t + 1
+        self.t, self.steps = t + 1, self.steps + 1
 
     def run(self, until: int, stop_on_fall: bool = True) -> None:
         """Step until frame ``until`` (at most the reference's end), or the fall."""

@@ -10,7 +10,7 @@ from physicalize.clip import physicalize_clip, robot_alone
 from physicalize.problem import tracking_problem
 from physicalize.reference import place_on_floor
 from physicalize.rollout import Tracker, initial_state, simulate
-from physicalize.search.beam import SearchConfig, drift_onset, search
+from physicalize.search.beam import Elite, Scorer, SearchConfig, _skip_ahead, drift_onset, frame_budget, search
 from physicalize.search.guide import GuidedReference, Segment, fade
 from physicalize.stage import search_config
 from physicalize.wbc import WholeBodyController
@@ -69,6 +69,31 @@ def test_nothing_is_searched_where_nothing_fell():
     nominal = simulate(scene, ref, _controller(scene), q0, v0)
     assert nominal.fell_at is None and drift_onset(ref, nominal) == nominal.frames
     assert search(scene, ref, lambda: _controller(scene), q0, v0, nominal) is None
+
+
+def test_the_search_skips_what_the_teacher_walks_unaided():
+    """A beam whose best stands clean: with a continuation that stands to the end the search is done; with one that a
+    shove at frame 100 topples, it resumes ``start_before`` frames before that continuation's drift onset, from the
+    best elite advanced there alone (the shove is a test's ``perturb``: the search itself never pushes)."""
+    scene, ref, (q0, v0) = _stand_problem(160)
+    scorer = Scorer.of(scene, ref)
+    for shove, done in ((0.0, True), (400.0, False)):
+
+        def perturb(t, d, shove=shove):
+            d.xfrc_applied[1, :3] = [shove, 0.0, 0.0] if 100 <= t < 110 else 0.0
+
+        tracker = Tracker(scene, ref, _controller(scene), q0, v0, perturb=perturb)
+        tracker.run(40)
+        best = Elite(tracker.snapshot(), (), 0.0)
+        beam, s, next_check = _skip_ahead(tracker, ref, [best], scorer, 5, 25, ref.frames)
+        if done:
+            assert (s, next_check) == (ref.frames, ref.frames) and beam == [best]
+            continue
+        shoved = simulate(scene, ref, _controller(scene), q0, v0, perturb=perturb)
+        onset = drift_onset(ref, shoved, since=40)
+        assert shoved.fell_at is not None and 100 <= onset < shoved.fell_at
+        assert (s, next_check) == (onset - 25, onset) and beam[0].snapshot.t == s and beam[0].segments == ()
+    assert frame_budget(SearchConfig(children_per_s=10.0), 100, 50) == 20 * 50  # 2 s: 20 children of 25 + 25 frames
 
 
 def test_bad_search_settings_are_one_line_errors():
