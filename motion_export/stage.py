@@ -18,6 +18,7 @@ an unknown format, an HDMI object name with another format or outside HDMI's, an
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import time
 from dataclasses import dataclass
@@ -86,6 +87,23 @@ def _write_all(source: ExportSource, fmt: str, folder: Path, hdmi_object: str | 
     return rows, frames, seconds
 
 
+def _out_error(exc: OSError, out: Path, tmp: Path) -> InputError | None:
+    """An OS error on the way to writing ``out`` (``/sys/x``, a read-only folder, a full disk) as the one line naming
+    ``out``: a path in the staging folder ``tmp`` as the one it was to have in ``out``, a folder above ``out`` that
+    could not be made as ``out``'s folder; None when the error is about another path (one read, say)."""
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    for name in (exc.filename, exc.filename2):
+        if name is None:
+            continue
+        path = Path(os.fsdecode(name))
+        if path == tmp or tmp in path.parents:
+            return InputError(out / path.relative_to(tmp), "out", f"cannot be written: {reason}")
+        if path == out or path in out.parents:
+            folder = "" if path == out else f" (its folder {path} cannot be made)"
+            return InputError(out, "out", f"cannot be written{folder}: {reason}")
+    return None
+
+
 def export_motion(
     name: str,
     fmt: str,
@@ -112,18 +130,24 @@ def export_motion(
     if out.exists() and not out.is_dir():
         raise InputError(out, "out", "exists and is not a folder")
     created = [p for p in (out.parent, *out.parent.parents) if not p.exists()]
-    out.parent.mkdir(parents=True, exist_ok=True)
-    remove_dead_staging(out)
     tmp = staging_folder(out)
     t1 = time.perf_counter()
     try:
-        tmp.mkdir()
-        rows, frames, seconds = _write_all(source, fmt, tmp, hdmi_object)
-        manifest = {"format": fmt, "dataset": name, "stage": stage, "root": str(source.root),
-                    "episodes_in_dataset": source.total, "episodes": rows}  # fmt: skip
-        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2, default=str) + "\n")
-        files = tuple((str(p.relative_to(tmp)), p.stat().st_size) for p in sorted(tmp.rglob("*")) if p.is_file())
-        replace_folder(tmp, out)
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            remove_dead_staging(out)
+            tmp.mkdir()
+            rows, frames, seconds = _write_all(source, fmt, tmp, hdmi_object)
+            manifest = {"format": fmt, "dataset": name, "stage": stage, "root": str(source.root),
+                        "episodes_in_dataset": source.total, "episodes": rows}  # fmt: skip
+            (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2, default=str) + "\n")
+            files = tuple((str(p.relative_to(tmp)), p.stat().st_size) for p in sorted(tmp.rglob("*")) if p.is_file())
+            replace_folder(tmp, out)
+        except OSError as exc:  # named as the folder asked for, never the staging folder beside it
+            named = _out_error(exc, out, tmp)
+            if named is None:
+                raise
+            raise named from exc
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         for p in created:  # the folders this call made, innermost first, if still empty

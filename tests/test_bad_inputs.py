@@ -235,6 +235,47 @@ def test_an_output_where_nothing_can_be_written_is_one_line_naming_it(tmp_path, 
     assert _tree(tmp_path) == before and not Path("/sys/lessmimic-x.mcap").exists()
 
 
+@pytest.mark.skipif(not Path("/sys").is_dir(), reason="needs /sys (sysfs: no file can be made in it)")
+def test_an_export_where_nothing_can_be_written_names_the_out_given(tmp_path, monkeypatch, capsys):
+    """Issue 55, case 6: export-motion's unwritable --out named its staging folder beside it
+    ('error: /sys/.x.staging-3781-f949296c: Operation not permitted'), a path the user never gave."""
+    import errno
+
+    from motion_export import stage
+    from pipeline.clip import RobotClip
+    from pipeline.dataset.clips import robot_clips_to_episodes
+    from pipeline.dataset.write import write_dataset
+    from pipeline.robot import actuator_profile, default_qpos
+
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path / "datasets"))
+    monkeypatch.chdir(tmp_path)
+    qpos = default_qpos(actuator_profile("mjlab"))[None].repeat(10, 0)
+    features, episodes = robot_clips_to_episodes([RobotClip(qpos, 50, "hand-made:stand", task="stand")])
+    write_dataset(tmp_path / "datasets/x/retargeted", "lessmimic/x-retargeted", 50, features, episodes)
+    export = ["export-motion", "--name", "x", "--stage", "retargeted", "--format", "gmr", "--out"]
+    before = _tree(tmp_path)
+    for out, why in (
+        ("/sys/lessmimic-x", "cannot be written: "),  # sysfs: no folder can be made in it
+        ("/proc/lessmimic-x", "cannot be written: "),
+        ("/sys/lessmimic-x/y", "cannot be written \\(its folder /sys/lessmimic-x cannot be made\\): "),
+    ):
+        assert main([*export, out]) == 2
+        err = capsys.readouterr().err.strip()
+        assert re.fullmatch(f"error: {out}: out: {why}[^\\n]+", err), err
+        assert "staging" not in err and not Path(out).exists()
+
+    def full_disk(ep, folder, stem):  # a failure in the middle names the file as the --out given holds it
+        (folder / f"{stem}.pkl").write_bytes(b"half")
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(folder / f"{stem}.pkl"))
+
+    monkeypatch.setitem(stage.FORMATS, "gmr", full_disk)
+    out = tmp_path / "out"
+    assert main([*export, str(out)]) == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]  # after the progress bar
+    assert last == f"error: {out}/0000_hand-made_stand.pkl: out: cannot be written: No space left on device", last
+    assert _tree(tmp_path) == before
+
+
 def test_datasets_root_that_is_a_file_is_one_line(tmp_path, monkeypatch, capsys):
     (tmp_path / "file").write_text("")
     monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path / "file"))
