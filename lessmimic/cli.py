@@ -20,7 +20,7 @@ import sys
 from lessmimic.corpus_commands import add_corpus
 from lessmimic.export_commands import add_export_motion
 from lessmimic.residual_commands import add_residual
-from lessmimic.tool_commands import add_tools
+from lessmimic.tool_commands import add_joint_names, add_tools
 from lessmimic.train_commands import add_train
 from pipeline.errors import INTERRUPTED, SUBJECT_HEIGHT_M, InputError, os_error_line
 from pipeline.stage.executor import EXECUTORS
@@ -121,6 +121,7 @@ def _read_options(a: argparse.Namespace) -> dict:
 
 
 def _cmd_import(a: argparse.Namespace) -> int:
+    from pipeline.readers.npz_order import joint_names_option
     from retarget.imported import run_stage
 
     if a.input is None:
@@ -133,6 +134,7 @@ def _cmd_import(a: argparse.Namespace) -> int:
         executor=a.executor,
         object_mesh=a.object_mesh,
         object_mass=a.object_mass,
+        joint_names=joint_names_option(a.joint_names) if a.joint_names is not None else None,
     )
     if report.get("up_to_date"):
         print(up_to_date_line("import", a.name, "retargeted"))
@@ -278,6 +280,7 @@ def _add_import(sub) -> None:
         "--object-mesh", default=None, help="mesh of the object the motions carry (default: <object>.obj beside them)"
     )
     p.add_argument("--object-mass", type=float, default=None, help="the object's mass in kg (default 2)")
+    add_joint_names(p)
     _run_args(p)
     p.set_defaults(func=_cmd_import, writes="name")
 

@@ -18,17 +18,38 @@ def out_path(path: str) -> Path:
     return out
 
 
+def add_joint_names(p: argparse.ArgumentParser) -> None:
+    """``--joint-names`` (import, inspect --robot, evaluate-retarget): what the readers' errors ask for
+    (:data:`pipeline.readers.npz_order.PASS_NAMES`), read by :func:`pipeline.readers.npz_order.joint_names_option`."""
+    p.add_argument(
+        "--joint-names",
+        default=None,
+        metavar="ORDER",
+        help="the joint_pos column order of a .npz motion that names none of its joints, where its bodies' kinematics "
+        "cannot tell it: mjlab, isaaclab (BeyondMimic's), or the 29 G1 joint names as a comma list or a file of them",
+    )
+
+
+def _joint_names(a: argparse.Namespace):
+    from pipeline.readers.npz_order import joint_names_option
+
+    return joint_names_option(a.joint_names) if a.joint_names is not None else None
+
+
 def _cmd_inspect(a: argparse.Namespace) -> int:
+    from pipeline.errors import InputError
     from pipeline.readers import read_clips, read_robot_clip
     from pipeline.stage.inspect_log import write_human_log, write_robot_log
 
     src = Path(a.file)
     out = out_path(a.out)
+    if a.joint_names is not None and not a.robot:
+        raise InputError(src, "--joint-names", "applies to a G1 motion (--robot), not a human clip")
     if a.robot:
         from pipeline.geometry import MeshGeometry
 
         geometry = MeshGeometry(a.object_mesh) if a.object_mesh else None
-        print(write_robot_log(read_robot_clip(src, object_geometry=geometry), out))
+        print(write_robot_log(read_robot_clip(src, object_geometry=geometry, joint_names=_joint_names(a)), out))
         return 0
     clips = read_clips(src, body_model=a.body_model, fps=a.fps, units=a.units, mesh=a.object_mesh)
     for i, c in enumerate(clips):
@@ -43,7 +64,7 @@ def _cmd_evaluate_retarget(a: argparse.Namespace) -> int:
     from retarget.metrics import evaluate_file
 
     out = out_path(a.out) if a.out else None
-    metrics = evaluate_file(a.file, human_path=a.human, object_mesh=a.object_mesh)
+    metrics = evaluate_file(a.file, human_path=a.human, object_mesh=a.object_mesh, joint_names=_joint_names(a))
     text = json.dumps({"file": str(a.file), **metrics}, indent=2, default=float)
     if out is not None:
         write_json_atomic(out, json.loads(text))
@@ -112,6 +133,7 @@ def add_tools(sub) -> None:
     p.add_argument("--body-model", default=None)
     p.add_argument("--fps", type=float, default=None, help="frame rate of a file that carries none (as retarget's)")
     p.add_argument("--units", default=None, choices=("auto", "m", "cm", "mm", "inch"), help="as retarget's --units")
+    add_joint_names(p)
     p.set_defaults(func=_cmd_inspect)
     p = sub.add_parser(
         "evaluate-retarget",
@@ -121,6 +143,7 @@ def add_tools(sub) -> None:
     p.add_argument("--human", default=None, help="the human clip it came from (foot contacts, contact flags)")
     p.add_argument("--object-mesh", default=None, help="mesh of the object the file carries poses for")
     p.add_argument("--out", default=None, help="also write the metrics to this JSON file")
+    add_joint_names(p)
     p.set_defaults(func=_cmd_evaluate_retarget)
     p = sub.add_parser("load", help="load a dataset by path or hub repo id with LeRobot's loader and summarise it")
     p.add_argument("dataset")

@@ -2,19 +2,22 @@
 ``motion.npz`` + ``meta.json`` folders; :mod:`pipeline.readers.peers`) become ``datasets/<NAME>/retargeted/``,
 so the physicalize and features stages run on them as on our own retargeting.
 
-``lessmimic import --input FILE_OR_FOLDER --name NAME [--object-mesh MESH]``. Each motion is resampled to the
-control rate (:data:`retarget.clip.FPS`) and labelled, per G1 link, with its contacts with the objects (a link's
-collision geoms within :data:`CONTACT_GAP_M` of an object's, in the same collision model the physics uses),
-because a peer's file carries no contact labels and the physicalize teacher's grasps come from them. Joints a
-file lacks that carry no weight (HDMI's wrists) are held at the default pose and named in the card; a file
+``lessmimic import --input FILE_OR_FOLDER --name NAME [--object-mesh MESH] [--joint-names ORDER]``. Each motion is
+resampled to the control rate (:data:`retarget.clip.FPS`) and labelled, per G1 link, with its contacts with the
+objects (a link's collision geoms within :data:`CONTACT_GAP_M` of an object's, in the same collision model the
+physics uses), because a peer's file carries no contact labels and the physicalize teacher's grasps come from them.
+Joints a file lacks that carry no weight (HDMI's wrists) are held at the default pose and named in the card; a file
 without a leg, waist or arm joint, or whose object has no geometry, is a one-line error. Motion files carry no
-object masses: ``--object-mass`` sets them (default: :class:`pipeline.geometry.ObjectPhysics`'s 2 kg). The stage follows
-the recipe of :mod:`pipeline.stage.run` (up to date, resumable).
+object masses: ``--object-mass`` sets them (default: :class:`pipeline.geometry.ObjectPhysics`'s 2 kg). A
+BeyondMimic/mjlab ``.npz`` that names none of its joints is read in the order its bodies' kinematics match; where
+they cannot tell, ``--joint-names`` gives it (:func:`pipeline.readers.npz_order.joint_names_option`). The stage
+follows the recipe of :mod:`pipeline.stage.run` (up to date, resumable).
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import replace
 
 import mujoco
@@ -95,8 +98,10 @@ def run_stage(
     executor: str = "local",
     object_mesh: str | None = None,
     object_mass: float | None = None,
+    joint_names: Sequence[str] | None = None,
 ) -> dict:
-    """``lessmimic import``: read every G1 motion of ``input_path``, label contacts, write the retargeted dataset."""
+    """``lessmimic import``: read every G1 motion of ``input_path``, label contacts, write the retargeted dataset.
+    ``joint_names``: the column order of the ``.npz`` motions that name none of their joints (``--joint-names``)."""
     check_executor(executor, jobs)
     geometry = MeshGeometry(object_mesh) if object_mesh else None
     if object_mass is not None and not object_mass > 0:
@@ -107,11 +112,15 @@ def run_stage(
         input=files_fingerprint([input_path]),
         object_mesh=files_fingerprint([object_mesh]) if object_mesh else None,
         object_mass=object_mass,
+        **({"joint_names": list(joint_names)} if joint_names is not None else {}),  # none: the fingerprints before it
     )
     run = StageRun(stage_dir(name, "retargeted"), fp)
     if not overwrite and (done := run.finished()) is not None:
         return {**done, "up_to_date": True}
-    clips = read_robot_clips(input_path, object_geometry=geometry)  # bad input fails before the output is claimed
+    clips = read_robot_clips(input_path, object_geometry=geometry, joint_names=joint_names)  # fails before the claim
+    if joint_names is not None and not any(c.provenance.get("format") == "beyondmimic_npz" for c in clips):
+        why = "applies to BeyondMimic/mjlab .npz motions that name none of their joints; this input has none"
+        raise InputError(input_path, "--joint-names", why)
     check_meshes(clips)
     if object_mass is not None:  # motion files carry no masses (default: pipeline.geometry.ObjectPhysics)
         clips = [replace(c, objects=tuple(replace(o, mass=object_mass) for o in c.objects)) for c in clips]

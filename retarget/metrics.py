@@ -56,6 +56,7 @@ The pass over the frames is :func:`retarget.collision_sweep.sweep` (its cost is 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -250,6 +251,7 @@ def evaluate_file(
     object_mesh: str | Path | None = None,
     link_map: dict[str, str] | None = None,
     seconds_wall: float | None = None,
+    joint_names: Sequence[str] | None = None,
 ) -> dict:
     """Metrics of a peer's G1 motion file (BeyondMimic/OmniRetarget ``.npz``, GMR ``.pkl``).
 
@@ -258,8 +260,9 @@ def evaluate_file(
     flags, aligned by time to the robot frames. The robot is scored against its OWN object
     track (OmniRetarget scales the object's trajectory; the human's track is not used).
     ``seconds_wall``: the peer's own run time when known (else ``frames_per_s`` is NaN).
+    ``joint_names``: the column order of a ``.npz`` that names none of its joints (``--joint-names``).
     """
     geometry = MeshGeometry(str(object_mesh)) if object_mesh is not None else None
-    robot = read_robot_clip(path, object_geometry=geometry)
+    robot = read_robot_clip(path, object_geometry=geometry, joint_names=joint_names)
     human = read_clips(human_path, mesh=object_mesh)[0] if human_path is not None else None
     return retarget_metrics(robot, human, link_map=link_map, seconds_wall=seconds_wall)

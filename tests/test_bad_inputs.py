@@ -129,6 +129,26 @@ def _fifo(folder: Path) -> Path:
     return path
 
 
+def _standing_qpos() -> np.ndarray:
+    """A standing G1's qpos (36,), each joint a little off its default, so that every column differs."""
+    from pipeline.robot import actuator_profile, default_qpos
+
+    return default_qpos(actuator_profile("mjlab")) + np.r_[np.zeros(7), 0.01 * np.arange(1, 30)]
+
+
+def _nameless_npz(folder: Path, order=None) -> Path:
+    """:func:`_standing_qpos` as a BeyondMimic ``.npz`` with ``joint_pos [T, 36]`` and no joint names nor bodies: its
+    order cannot be told. ``order``: its joint columns in these names' order (default mjlab's)."""
+    from pipeline.robot import G1_JOINT_NAMES
+    from retarget.clip import FPS
+
+    qpos = _standing_qpos()
+    cols = [7 + G1_JOINT_NAMES.index(n) for n in order or G1_JOINT_NAMES]
+    path = folder / "nameless.npz"
+    np.savez(path, fps=[FPS], joint_pos=np.tile(np.r_[qpos[:7], qpos[cols]], (10, 1)))
+    return path
+
+
 # (case, the command line given the inputs folder, exit status, what the error line holds)
 CASES = [
     ("height -1", lambda d: ["retarget", "--height", "-1"], 2, "-1.0: --height: must be the subject's height"),
@@ -188,6 +208,24 @@ CASES = [
         "bare/physicalized: objects: the dataset has no object tracks",
     ),
     ("verify a missing folder", lambda d: ["verify", "/nonexistent/x"], 2, "is not a dataset folder"),
+    (
+        "a nameless npz whose order cannot be told",
+        lambda d: ["import", "--input", str(_nameless_npz(d))],
+        2,
+        "nameless.npz: joint_names: missing, and .* cannot be told: pass --joint-names mjlab or isaaclab, or the",
+    ),
+    (
+        "--joint-names not the 29 joints",
+        lambda d: ["import", "--input", str(_nameless_npz(d)), "--joint-names", "a,b"],
+        2,
+        "a,b: --joint-names: 2 names; not G1 joints: a, b; missing: .* \\(and 25 more\\): expected mjlab or isaaclab",
+    ),
+    (
+        "--joint-names with no npz to apply to",
+        lambda d: ["inspect", str(_bvh(d, [0, 1])), "--out", str(d / "x.mcap"), "--joint-names", "mjlab"],
+        2,
+        "take.bvh: --joint-names: applies to a G1 motion \\(--robot\\)",
+    ),
 ]
 
 
@@ -274,6 +312,33 @@ def test_an_export_where_nothing_can_be_written_names_the_out_given(tmp_path, mo
     last = capsys.readouterr().err.strip().splitlines()[-1]  # after the progress bar
     assert last == f"error: {out}/0000_hand-made_stand.pkl: out: cannot be written: No space left on device", last
     assert _tree(tmp_path) == before
+
+
+def test_the_flag_the_order_error_names_exists_and_fixes_it(tmp_path, monkeypatch, capsys):
+    """Issue 55, case 8: a nameless .npz whose order its kinematics cannot tell asked for ``joint_names=``, which no
+    command has; the flag it names now exists in every command that reads G1 motions, and fixes the case end to
+    end: the columns, given in Isaac Lab's order, land on mjlab's joints."""
+    from lessmimic.cli import build_parser
+    from motion_export.episodes import select_episodes
+    from pipeline.isaaclab_order import ISAACLAB_JOINT_NAMES
+
+    monkeypatch.setenv("LESSMIMIC_DATASETS", str(tmp_path / "datasets"))
+    npz = _nameless_npz(tmp_path, order=ISAACLAB_JOINT_NAMES)
+    assert main(["import", "--input", str(npz), "--name", "n"]) == 2
+    flag = re.search(r"pass (--[\w-]+) ", capsys.readouterr().err).group(1)
+    parser = build_parser()
+    for argv in (["import"], ["inspect", "f", "--out", "o", "--robot"], ["evaluate-retarget", "f"]):
+        assert getattr(parser.parse_args([*argv, flag, "isaaclab"]), flag[2:].replace("-", "_")) == "isaaclab"
+    names = tmp_path / "names.txt"
+    names.write_text("\n".join(ISAACLAB_JOINT_NAMES) + "\n")
+    want = _standing_qpos()
+    for name, value in (("named", "isaaclab"), ("listed", ",".join(ISAACLAB_JOINT_NAMES)), ("file", str(names))):
+        assert main(["import", "--input", str(npz), "--name", name, flag, value]) == 0, capsys.readouterr().err
+        (ep,) = select_episodes(name, "retargeted").episodes
+        np.testing.assert_allclose(ep.clip.qpos, np.tile(want, (ep.clip.frames, 1)), atol=1e-6)
+        assert ep.clip.provenance["joint_order"].startswith("no joint names: the names given (--joint-names)")
+    assert main(["import", "--input", str(npz), "--name", "wrong", flag, "mjlab"]) == 0  # told, not checked
+    assert not np.allclose(select_episodes("wrong", "retargeted").episodes[0].clip.qpos[0], want, atol=1e-3)
 
 
 def test_datasets_root_that_is_a_file_is_one_line(tmp_path, monkeypatch, capsys):

@@ -98,8 +98,15 @@ def test_joints_only_npz_takes_root_from_bodies(tmp_path):
     q = tmp_path / "nonames.npz"
     np.savez(q, fps=[50], joint_pos=np.zeros((T, 36)))
     expect_input_error(
-        lambda: read_beyondmimic_npz(q), tmp_path, file=q, field="joint_names", match="pass joint_names="
+        lambda: read_beyondmimic_npz(q), tmp_path, file=q, field="joint_names", match="pass --joint-names mjlab"
     )
+    np.savez(q, fps=[50], joint_pos=np.tile(np.r_[0, 0, 0.8, 1, 0, 0, 0, 0.01 * np.arange(29)], (T, 1)))
+    given = read_beyondmimic_npz(q, joint_names=G1_JOINT_NAMES[::-1])  # the names given read its columns
+    np.testing.assert_allclose(given.qpos[0, 7:], 0.01 * np.arange(29)[::-1])
+    backwards = list(G1_JOINT_NAMES)[::-1]  # names given for a file naming its own in another order: refused
+    expect_input_error(lambda: read_beyondmimic_npz(p, joint_names=backwards), tmp_path, file=p, field="joint_names",
+                       match="names its joints, in another order than the names given")  # fmt: skip
+    assert read_beyondmimic_npz(p, joint_names=G1_JOINT_NAMES).provenance["joint_order"].startswith("reordered")
     s = tmp_path / "wide.npz"
     np.savez(s, fps=[50], joint_pos=np.zeros((T, 30)), joint_names=np.array(G1_JOINT_NAMES))
     expect_input_error(lambda: read_beyondmimic_npz(s), tmp_path, file=s, field="joint_pos", match=r"\(3, 30\)")

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import csv
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -235,7 +236,7 @@ def read_robot_clip(
     object_geometry: ObjectGeometry | None = None,
     object_scale: float = 1.0,
     object_name: str | None = None,
-    joint_names: list[str] | None = None,
+    joint_names: Sequence[str] | None = None,
     fmt: str | None = None,
     fps: float | None = None,
 ) -> RobotClip:
@@ -281,11 +282,14 @@ def _robot_candidates(folder: Path) -> list[Path]:
     return out
 
 
-def read_robot_clips(path: str | Path, *, object_geometry: ObjectGeometry | None = None) -> list[RobotClip]:
+def read_robot_clips(
+    path: str | Path, *, object_geometry: ObjectGeometry | None = None, joint_names: Sequence[str] | None = None
+) -> list[RobotClip]:
     """Every G1 motion in ``path``: a BeyondMimic/mjlab ``.npz``, a GMR ``.pkl``, a Unitree ``.csv`` (30 Hz), an HDMI
     motion folder, or a folder of them (searched recursively). An object a file carries must have a geometry
     (``object_geometry``, else ``<name>.obj`` beside the file): a one-line :class:`InputError` otherwise, as for any
-    unreadable file."""
+    unreadable file. ``joint_names``: the column order of the ``.npz`` files that name none of their joints
+    (``--joint-names``; :func:`pipeline.readers.peers.read_beyondmimic_npz`)."""
     from pipeline.readers.peers import object_mesh_beside, read_hdmi_motion
 
     path = Path(path)
@@ -304,7 +308,7 @@ def read_robot_clips(path: str | Path, *, object_geometry: ObjectGeometry | None
             continue
         with warnings.catch_warnings():  # an object left out for want of geometry is looked for beside the file
             warnings.simplefilter("ignore", UserWarning)
-            clip = read_robot_clip(item, object_geometry=object_geometry)
+            clip = read_robot_clip(item, object_geometry=object_geometry, joint_names=joint_names)
         left_out = clip.provenance.get("object_left_out")
         if left_out is not None:
             geometry = object_mesh_beside(item, left_out)
@@ -312,7 +316,7 @@ def read_robot_clips(path: str | Path, *, object_geometry: ObjectGeometry | None
                 raise InputError(
                     item, f"object {left_out}", "has no geometry: pass --object-mesh or put <name>.obj beside it"
                 )
-            clip = read_robot_clip(item, object_geometry=geometry, object_name=left_out)
+            clip = read_robot_clip(item, object_geometry=geometry, object_name=left_out, joint_names=joint_names)
         clips.append(clip)
     if not clips:
         raise InputError(path, "input", "no G1 motions (.npz, .pkl, .csv, HDMI motion folders) in this folder")

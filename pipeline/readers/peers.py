@@ -9,7 +9,9 @@ BeyondMimic / mjlab motion ``.npz`` (OmniRetarget writes it too)
     uses). A file without ``joint_names`` (what BeyondMimic's and mjlab's ``csv_to_npz.py``
     write: ``joint_pos [T, 29]`` and 30 bodies) is in Isaac Lab's breadth-first order
     (BeyondMimic) or MuJoCo's depth-first one (mjlab), told apart by the bodies' forward
-    kinematics (:mod:`pipeline.readers.npz_order`); neither matching needs ``joint_names=``. ``object_quat_w`` is
+    kinematics (:mod:`pipeline.readers.npz_order`); neither matching (or both) needs the names, ``joint_names=``
+    (``--joint-names``: they name a nameless file's columns; a file naming its own joints otherwise is an
+    :class:`InputError`). ``object_quat_w`` is
     ``wxyz``: in ``sub3_largebox_003_mj_w_obj.npz`` it equals the ``largebox_link`` entry of
     ``body_quat_w`` (MuJoCo order, 1e-7) and the human clip's ``xyzw`` object quaternion with its
     scalar moved first.
@@ -55,6 +57,7 @@ from __future__ import annotations
 import csv
 import json
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -134,7 +137,7 @@ def read_beyondmimic_npz(
     object_geometry: ObjectGeometry | None = None,
     object_scale: float = 1.0,
     object_name: str | None = None,
-    joint_names: list[str] | None = None,
+    joint_names: Sequence[str] | None = None,
 ) -> RobotClip:
     """A BeyondMimic / mjlab motion ``.npz`` as a :class:`RobotClip` (see the module doc)."""
     src = str(path)
@@ -144,8 +147,13 @@ def read_beyondmimic_npz(
     T = jp.shape[0]
     if jp.shape[1] not in (29, 36):
         raise InputError(src, "joint_pos", f"shape {jp.shape} is not (T, 36) or (T, 29)")
-    names = joint_names if joint_names is not None else d.get("joint_names")
+    names = d.get("joint_names")
     order = "reordered by name to mjlab G1 order"
+    if joint_names is not None and names is not None and [str(n) for n in names] != [str(n) for n in joint_names]:
+        why = "the file names its joints, in another order than the names given (--joint-names): leave them out"
+        raise InputError(src, "joint_names", why)
+    if joint_names is not None and names is None:
+        names, order = joint_names, "no joint names: the names given (--joint-names); reordered to mjlab's"
     if names is None:
         found, names = nameless_order(d, src)
         order = f"no joint names: {found} order, told by the bodies' forward kinematics; reordered to mjlab's"
