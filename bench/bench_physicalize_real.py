@@ -156,12 +156,24 @@ TRACE = (
 )
 
 
-def trace_line(row: dict) -> str:
+OBJECT_TRACE = (
+    ("object_drift_s", "object strayed@", "{:5.2f}"),
+    ("object_drift_cause", "", "{}"),
+    ("object_drift_along_m", "along", "{:+5.2f}"),
+    ("object_drift_lateral_m", "across", "{:+5.2f}"),
+    ("object_drift_yaw_deg", "yaw", "{:+4.0f}"),
+    ("object_drift_hands_planned", "hands planned", "{:d}"),
+    ("object_drift_hands_touching", "touching", "{:d}"),
+)
+
+
+def trace_line(row: dict, fields: tuple = TRACE) -> str:
     """The balance trace of a row (:mod:`physicalize.balance`): when it fell, when and on which support the pelvis
     drifted, the drift 0.2 s before the fall, the capture-point steps, planned vs measured foot contacts, the longest
-    single support and the planned ZMP's excursion from the support."""
+    single support and the planned ZMP's excursion from the support; or, with ``fields`` :data:`OBJECT_TRACE`, where
+    its object strayed (:mod:`physicalize.object_trace`)."""
     out = []
-    for key, name, fmt in TRACE:
+    for key, name, fmt in fields:
         v = row.get(key)
         out.append(f"{name} {'-' if v is None else fmt.format(v).strip()}")
     return "  ".join(out)
@@ -214,6 +226,9 @@ def summary(rows: list[dict]) -> list[str]:
         )
     causes = Counter(r["verdict"] for r in rows if not r["valid"])
     lines.append("outcomes: " + ", ".join(f"{k} {v}" for k, v in causes.most_common()))
+    strayed = Counter(r["object_drift_cause"] for r in rows if not r["valid"] and r.get("object_drift_s") is not None)
+    if strayed:
+        lines.append("objects strayed (failed takes): " + ", ".join(f"{k} {v}" for k, v in strayed.most_common()))
     return lines
 
 
@@ -266,6 +281,8 @@ def main() -> None:
             )
         if args.robot_only:
             print(f"{'':28s}{trace_line(r)}")
+        elif r.get("object_drift_s") is not None and not r["valid"]:
+            print(f"{'':28s}{trace_line(r, OBJECT_TRACE)}")
     before = [{**r, "valid": False, "verdict": r["verdict_before"]} if r["searched"] else r for r in rows]
     print("before the search: " + summary(before)[0].removeprefix("all").strip())
     for line in summary(rows):

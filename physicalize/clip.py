@@ -23,6 +23,7 @@ from physicalize.feasibility import (
     rejection,
     rejection_reason,
 )
+from physicalize.object_trace import object_trace_figures
 from physicalize.payload import capped, held_objects, load_scale
 from physicalize.problem import object_qpos, tracking_problem
 from physicalize.rollout import Rollout, initial_state, replay, simulate
@@ -164,6 +165,14 @@ def _figures(
     return figures
 
 
+def _traces(scene, ref, roll: Rollout, touch_force: float, clip: RobotClip, objects) -> dict:
+    """What a rollout's failure is traced by: where it lost its balance (:mod:`physicalize.balance`) and where it
+    lost its object (:mod:`physicalize.object_trace`)."""
+    figures = balance_figures(scene.model, ref, roll, touch_force)
+    figures.update(object_trace_figures(ref, roll, scene.object_qpos_adr, objects, clip.contact_links))
+    return figures
+
+
 def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, gains, config: SearchConfig):
     """``(gain set, rollout, figures)`` of the search (:mod:`physicalize.search.beam`) from the gain set whose rollout
     fell last: up to ``config.attempts`` searches (seeds ``config.seed``, ``+ 1``, ...) sharing the budget
@@ -184,7 +193,7 @@ def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, ga
         figures = _figures(scene, found.rollout, clip, objects, *state0, None, ref_figures)
         if figures["valid"] or frames >= budget:
             break
-    figures.update(balance_figures(scene.model, ref, found.rollout, gains[index].touch_force))
+    figures.update(_traces(scene, ref, found.rollout, gains[index].touch_force, clip, objects))
     figures["search"] = {
         "gain_set": index,
         "start_s": found.start / clip.fps,
@@ -258,7 +267,7 @@ def physicalize_clip(
         )
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
         figures = _figures(scene, roll, clip, objects, qpos0, qvel0, perturb, ref_figures)
-        figures.update(balance_figures(scene.model, ref, roll, config.touch_force))
+        figures.update(_traces(scene, ref, roll, config.touch_force, clip, objects))
         tried.append((index, roll, figures))
         if tried[-1][2]["valid"]:
             break

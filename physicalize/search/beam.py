@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from physicalize.balance import DRIFT_M
+from physicalize.object_trace import OBJECT_DRIFT_M
 from physicalize.reference import Reference
 from physicalize.rollout import Rollout, Snapshot, Tracker
 from physicalize.search.guide import GuidedReference, Segment
@@ -42,7 +43,6 @@ from pipeline.scene import Scene
 
 FALL_COST = 100.0
 BAR_COST = 1.0
-OBJECT_DRIFT_M = 0.1  # an object this far from its reference track has started to be lost
 BARS = Bars()
 
 
