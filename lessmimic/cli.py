@@ -309,8 +309,9 @@ def _add_physicalize(sub) -> None:
         "--search-budget",
         type=float,
         default=None,
-        help="children per second of motion of the search with the QP in the loop where the teacher's rollout falls "
-        "(physicalize/search/; 0: no search; default 220, at most ~18 CPU-s per second of motion)",
+        help="the budget of the search with the QP in the loop where the teacher's rollout falls, as the simulated "
+        "frames of this many children per second of motion (physicalize/search/; 0: no search; default: "
+        "SearchConfig.children_per_s, ~12-20 CPU-s per second of motion at most)",
     )
     p.set_defaults(func=_cmd_physicalize, writes="name")
 

@@ -125,12 +125,28 @@ def _reference_figures(scene, ref, clip: RobotClip) -> tuple[dict, str]:
         held = ref.grasp.grasped.any(axis=1)
         outside = held & ~ref.grasp.friction_ok
     figures["reference_grasp_outside_friction_frac"] = float(outside.sum() / max(held.sum(), 1))  # of the held frames
-    cause = (
-        f"; the hands' planned force leaves their friction cones from t={np.flatnonzero(outside)[0] / fps:.2f} s"
-        if outside.any()
-        else ""
-    )
-    return figures, cause  # a cause no controller can overcome
+    return figures, _hold_cause(figures, outside, fps)
+
+
+def _hold_cause(figures: dict, outside: np.ndarray, fps: float) -> str:
+    """What an invalid rollout's reason adds about the reference's holds: where no pressing hands (and floor) can
+    give the force the held object needs (:func:`physicalize.feasibility.hold_feasibility`: physics, a cause no
+    controller overcomes); else where only the grasp plan's share of it per hand leaves the friction cones (the hands
+    together could give it: ``sub8_largebox_000``'s plan left the cones on 11% of its held frames, the physics on 6%).
+    """
+    start = figures.get("reference_hold_infeasible_from_s")
+    if start is not None:
+        share = figures["reference_hold_infeasible_frac"]
+        return (
+            f"; pressing hands cannot give the force the held object needs on {share:.0%} of the held frames from "
+            f"t={start:.2f} s"
+        )
+    if outside.any():
+        return (
+            "; the grasp plan's force per hand leaves its friction cone from "
+            f"t={np.flatnonzero(outside)[0] / fps:.2f} s (the hands together could give it)"
+        )
+    return ""
 
 
 def _payload_capped(clip: RobotClip, scene, ref) -> tuple[RobotClip, dict] | None:

@@ -52,3 +52,19 @@ def test_a_box_that_stays_on_its_track_has_no_drift_and_the_hand_columns_are_the
     assert figures["valid"] and figures["object_drift_s"] is None and "object_drift_cause" not in figures
     links = ("pelvis", "left_wrist_yaw_link", "right_knee_link", "right_wrist_yaw_link", "left_elbow_link")
     assert hand_columns(links) == ([1], [3])
+
+
+def test_an_invalid_rollouts_reason_names_the_physics_before_the_plans_split():
+    """Where pressing hands cannot give the needed force at all (physicalize.feasibility), the reason says so; where
+    only the plan's share per hand leaves a cone, it says that the hands together could give it."""
+    from physicalize.clip import _hold_cause
+
+    outside = np.zeros(100, bool)
+    outside[60:] = True
+    physics = {"reference_hold_infeasible_from_s": 1.5, "reference_hold_infeasible_frac": 0.25}
+    assert _hold_cause(physics, outside, 50) == (
+        "; pressing hands cannot give the force the held object needs on 25% of the held frames from t=1.50 s"
+    )
+    split = {"reference_hold_infeasible_from_s": None, "reference_hold_infeasible_frac": 0.0}
+    assert _hold_cause(split, outside, 50).endswith("from t=1.20 s (the hands together could give it)")
+    assert _hold_cause(split, np.zeros(100, bool), 50) == ""
