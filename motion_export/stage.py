@@ -124,6 +124,8 @@ def export_motion(
         raise InputError(stage_dir(name, stage), "hdmi_object", why)
     t0 = time.perf_counter()
     source = select_episodes(name, stage, episode=episode, include_invalid=include_invalid)
+    if out is not None and not Path(out).parent.is_dir():  # a given --out never makes the folders above it
+        raise InputError(out, "out", f"its folder {Path(out).parent} does not exist (make it first)")
     out = Path(out) if out is not None else default_out(name, fmt, stage)
     if out.exists() and not overwrite:
         raise InputError(out, "out", "exists; pass --overwrite (OVERWRITE=1 with make) to replace it")

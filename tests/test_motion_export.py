@@ -487,9 +487,14 @@ def test_bad_input_is_one_line_and_leaves_nothing(exported, tmp_path, monkeypatc
         raise InputError(folder / stem, "frames", "broken on purpose")
 
     monkeypatch.setitem(stage.FORMATS, "gmr", broken)
+    (tmp_path / "a").mkdir()
     with pytest.raises(InputError, match="broken on purpose"):
-        export_motion(NAME, "gmr", tmp_path / "a" / "b" / "out")
-    assert not (tmp_path / "a").exists()
+        export_motion(NAME, "gmr", tmp_path / "a" / "out")
+    assert not any((tmp_path / "a").iterdir())  # no partial output, no staging folder left
+    expect_input_error(
+        lambda: export_motion(NAME, "gmr", tmp_path / "b" / "out"), tmp_path, file=tmp_path / "b" / "out", field="out"
+    )
+    assert not (tmp_path / "b").exists()  # a given --out never makes the folders above it
     with pytest.raises(InputError, match="broken on purpose"):
         export_motion(NAME, "gmr", overwrite=True)
     assert sorted(p.name for p in summaries["gmr"].out.parent.iterdir()) == sorted(FORMAT_NAMES)  # old one kept
