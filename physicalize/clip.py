@@ -8,6 +8,7 @@ is valid."""
 from __future__ import annotations
 
 import hashlib
+import math
 import time
 from dataclasses import dataclass, replace
 from functools import partial
@@ -192,7 +193,9 @@ def _traces(scene, ref, roll: Rollout, touch_force: float, clip: RobotClip, obje
 def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, gains, config: SearchConfig):
     """``(gain set, rollout, figures)`` of the search (:mod:`physicalize.search.beam`) from the gain set whose rollout
     fell last: up to ``config.attempts`` searches (seeds ``config.seed``, ``+ 1``, ...) sharing the budget
-    (:attr:`~physicalize.search.beam.SearchConfig.children_per_s`) until one's rollout is valid, else the last; its
+    (:attr:`~physicalize.search.beam.SearchConfig.children_per_s`) until one's rollout is valid, else the one that
+    went wrong last (:func:`_went_wrong_at`; the earlier on a tie: a later attempt has less budget left: on
+    ``sub2_woodchair_002`` at 120 the third searched three segments and stood no longer than the teacher); its
     figures carry ``search``: where it started, its segments, the children and CPU-seconds of every attempt, and the
     verdict before and after. None when no tried rollout fell."""
     fell = [(k, r, f) for k, r, f in tried if r.fell_at is not None]
@@ -201,14 +204,18 @@ def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, ga
     index, nominal, before = max(fell, key=lambda x: x[1].fell_at)
     make = partial(WholeBodyController, scene.model, scene.profile, gains[index])
     budget, spent, children, frames = beam.frame_budget(config, ref.frames, clip.fps), 0.0, 0, 0
+    best = None
     for attempt in range(config.attempts):
         share, left = replace(config, seed=config.seed + attempt), budget - frames
         kw = {"contact_links": clip.contact_links, "objects": objects, "max_frames": left}
-        found = beam.search(scene, ref, make, *state0, nominal, share, **kw)
-        spent, children, frames = spent + found.cpu_s, children + found.children, frames + found.frames
-        figures = _figures(scene, found.rollout, clip, objects, *state0, None, ref_figures)
-        if figures["valid"] or frames >= budget:
+        tried_now = beam.search(scene, ref, make, *state0, nominal, share, **kw)
+        spent, children, frames = spent + tried_now.cpu_s, children + tried_now.children, frames + tried_now.frames
+        now = _figures(scene, tried_now.rollout, clip, objects, *state0, None, ref_figures)
+        if best is None or (now["valid"], _went_wrong_at(now)) > (best[1]["valid"], _went_wrong_at(best[1])):
+            best = tried_now, now
+        if now["valid"] or frames >= budget:
             break
+    found, figures = best
     figures.update(_traces(scene, ref, found.rollout, gains[index].touch_force, clip, objects))
     figures["search"] = {
         "gain_set": index,
@@ -223,6 +230,13 @@ def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, ga
         "reason_after": figures["reason"],
     }
     return index, found.rollout, figures
+
+
+def _went_wrong_at(figures: dict) -> float:
+    """When a rollout first went wrong, in seconds: its fall or its object's loss, whichever came first; infinite for
+    one that neither fell nor lost its object (what failed it then is a bar met or missed over the whole clip)."""
+    times = [t for t in (figures.get("fell_at_s"), figures.get("object_lost_at_s")) if t is not None]
+    return min(times, default=math.inf)
 
 
 def _rejected(figures: dict, rejected: str) -> dict:
@@ -248,8 +262,12 @@ def physicalize_clip(
     ``(None, None, figures with "rejected": <class>, {})``.
 
     The base teacher tries the QP gain sets ``gains`` (default :data:`physicalize.wbc_config.TEACHER_GAINS`) in
-    order from the same initial state and keeps the first rollout that is valid, else the first set's:
-    rejection sampling over controller gains, each rollout validated on its own. ``figures`` name the set
+    order from the same initial state and keeps the first rollout that is valid, else the one that went wrong last
+    (:func:`_went_wrong_at`; the earlier set's on a tie): rejection sampling over controller gains, each rollout
+    validated on its own. Where none is valid the search (:func:`_search`) runs, and its best is kept when it is
+    valid or went wrong later still: an invalid clip carries the figures, traces and class of the furthest any
+    rollout got (the 12 shared real takes searched with their objects: the search's best on 11, 6 of them standing to
+    the end and only losing the object). ``figures`` name the set
     kept (``teacher_gains``, its index) and how many ran (``teacher_attempts``); timings count them all. The
     object loop's sets run only on a clip whose hands hold something (else they are the open loop's sets again).
     A residual teacher runs the first set only (its policy was trained on it)."""
@@ -287,16 +305,20 @@ def physicalize_clip(
         tried.append((index, roll, figures))
         if tried[-1][2]["valid"]:
             break
-    kept, roll, figures = tried[-1] if tried[-1][2]["valid"] else tried[0]
+    kept, roll, figures = tried[-1] if tried[-1][2]["valid"] else max(tried, key=lambda x: _went_wrong_at(x[2]))
     if not figures["valid"] and len(tried) > 1:
-        figures["reason"] += "".join(f"; gain set {k}: {f['reason'].split(';')[0]}" for k, _, f in tried[1:])
+        others = [(k, f) for k, _, f in tried if k != kept]
+        figures["reason"] += "".join(f"; gain set {k}: {f['reason'].split(';')[0]}" for k, f in others)
     if not figures["valid"] and search is not None and residual is None and perturb is None:
         t0, cpu0 = time.perf_counter(), time.process_time()
         found = _search(scene, ref, clip, objects, (qpos0, qvel0), ref_figures, tried, gains, search)
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
-        if found is not None and found[2]["valid"]:
+        if found is not None and (found[2]["valid"] or _went_wrong_at(found[2]) > _went_wrong_at(figures)):
+            before = figures["reason"].split(";")[0]
             kept, roll, figures = found
-        elif found is not None:  # the search's best is invalid too: the tried rollout stays, with what was searched
+            if not figures["valid"]:
+                figures["reason"] += f"; before the search: {before}"
+        elif found is not None:  # the search's best went wrong sooner: the tried rollout stays, with what was searched
             figures = {**figures, "search": found[2]["search"]}
     figures["teacher_gains"], figures["teacher_attempts"] = kept, len(tried)
     figures["start_prefix_s"] = prefix_frames(clip) / clip.fps

@@ -32,6 +32,8 @@ from pipeline.clip import PhysicalizedClip, RobotClip
 from pipeline.dataset.card import DatasetCard
 from pipeline.dataset.clips import episodes_to_robot_clips, physicalized_clips_to_episodes
 from pipeline.dataset.objects import objects_note
+from pipeline.dataset.ranges import check_ranges
+from pipeline.dataset.schema import validate_episode
 from pipeline.dataset.write import write_dataset
 from pipeline.errors import InputError
 from pipeline.geometry import provenance_variant
@@ -53,6 +55,20 @@ class ClipResult:
     rollout: Rollout | None
     figures: dict
     com: dict  # reference / planned / simulated CoM series for the plot
+
+
+def _in_range(result: ClipResult, fps: float) -> bool:
+    """Whether an invalid clip kept by ``--keep-invalid`` is within the dataset's value ranges
+    (:mod:`pipeline.dataset.ranges`), which the writer refuses a dataset for; one that is not is reported (its reason
+    says so) and not written. Why: a rollout that fell can fling a joint far past its stop (measured: the hand-made
+    teleport clip's wrist 0.75 rad past it), and one kept failure must not refuse the dataset of every valid clip."""
+    features, episodes = physicalized_clips_to_episodes([_physicalized(result)])
+    try:
+        check_ranges(validate_episode(features, episodes[0], result.source), fps, result.source)
+    except InputError as e:
+        result.figures["reason"] += f"; not written (--keep-invalid): {str(e).removeprefix(result.source + ': ')}"
+        return False
+    return True
 
 
 def physicalize_one(
@@ -302,6 +318,7 @@ def run_stage(
     simulate = partial(physicalize_one, teacher=teacher, profile=prof.name, search=search)
     results = run.map(simulate, list(enumerate(clips)), key=_clip_key, jobs=jobs, executor=executor, desc="physicalize")
     kept = [r for r in results if r.robot is not None and (r.figures["valid"] or keep_invalid)]
+    kept = [r for r in kept if r.figures["valid"] or _in_range(r, clips[0].fps)]
     report = _report(results, clips, spec, teacher, prof, keep_invalid, len(kept))
     for c in report["clips"]:
         if not c["valid"]:
