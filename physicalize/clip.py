@@ -194,7 +194,7 @@ def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, ga
     """``(gain set, rollout, figures)`` of the search (:mod:`physicalize.search.beam`) from the gain set whose rollout
     fell last: up to ``config.attempts`` searches (seeds ``config.seed``, ``+ 1``, ...) sharing the budget
     (:attr:`~physicalize.search.beam.SearchConfig.children_per_s`) until one's rollout is valid, else the one that
-    went wrong last (:func:`_went_wrong_at`; the earlier on a tie: a later attempt has less budget left: on
+    went wrong last (:func:`_how_far`; the earlier on a tie: a later attempt has less budget left: on
     ``sub2_woodchair_002`` at 120 the third searched three segments and stood no longer than the teacher); its
     figures carry ``search``: where it started, its segments, the children and CPU-seconds of every attempt, and the
     verdict before and after. None when no tried rollout fell."""
@@ -208,11 +208,11 @@ def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, ga
     for attempt in range(config.attempts):
         share, left = replace(config, seed=config.seed + attempt), budget - frames
         kw = {"contact_links": clip.contact_links, "objects": objects, "max_frames": left}
-        tried_now = beam.search(scene, ref, make, *state0, nominal, share, **kw)
-        spent, children, frames = spent + tried_now.cpu_s, children + tried_now.children, frames + tried_now.frames
-        now = _figures(scene, tried_now.rollout, clip, objects, *state0, None, ref_figures)
-        if best is None or (now["valid"], _went_wrong_at(now)) > (best[1]["valid"], _went_wrong_at(best[1])):
-            best = tried_now, now
+        result = beam.search(scene, ref, make, *state0, nominal, share, **kw)
+        spent, children, frames = spent + result.cpu_s, children + result.children, frames + result.frames
+        now = _figures(scene, result.rollout, clip, objects, *state0, None, ref_figures)
+        if best is None or _how_far(now) > _how_far(best[1]):
+            best = result, now
         if now["valid"] or frames >= budget:
             break
     found, figures = best
@@ -232,11 +232,12 @@ def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, ga
     return index, found.rollout, figures
 
 
-def _went_wrong_at(figures: dict) -> float:
-    """When a rollout first went wrong, in seconds: its fall or its object's loss, whichever came first; infinite for
-    one that neither fell nor lost its object (what failed it then is a bar met or missed over the whole clip)."""
+def _how_far(figures: dict) -> tuple[bool, float]:
+    """How far a rollout got, to order rollouts by (the larger the further): valid first, then when it first went
+    wrong, in seconds: its fall or its object's loss, whichever came first; infinite for one that neither fell nor
+    lost its object (what failed it then is a bar met or missed over the whole clip)."""
     times = [t for t in (figures.get("fell_at_s"), figures.get("object_lost_at_s")) if t is not None]
-    return min(times, default=math.inf)
+    return bool(figures["valid"]), min(times, default=math.inf)
 
 
 def _rejected(figures: dict, rejected: str) -> dict:
@@ -263,7 +264,7 @@ def physicalize_clip(
 
     The base teacher tries the QP gain sets ``gains`` (default :data:`physicalize.wbc_config.TEACHER_GAINS`) in
     order from the same initial state and keeps the first rollout that is valid, else the one that went wrong last
-    (:func:`_went_wrong_at`; the earlier set's on a tie): rejection sampling over controller gains, each rollout
+    (:func:`_how_far`; the earlier set's on a tie): rejection sampling over controller gains, each rollout
     validated on its own. Where none is valid the search (:func:`_search`) runs, and its best is kept when it is
     valid or went wrong later still: an invalid clip carries the figures, traces and class of the furthest any
     rollout got (the 12 shared real takes searched with their objects: the search's best on 11, 6 of them standing to
@@ -305,7 +306,7 @@ def physicalize_clip(
         tried.append((index, roll, figures))
         if tried[-1][2]["valid"]:
             break
-    kept, roll, figures = tried[-1] if tried[-1][2]["valid"] else max(tried, key=lambda x: _went_wrong_at(x[2]))
+    kept, roll, figures = max(tried, key=lambda x: _how_far(x[2]))  # the first of equals
     if not figures["valid"] and len(tried) > 1:
         others = [(k, f) for k, _, f in tried if k != kept]
         figures["reason"] += "".join(f"; gain set {k}: {f['reason'].split(';')[0]}" for k, f in others)
@@ -313,7 +314,7 @@ def physicalize_clip(
         t0, cpu0 = time.perf_counter(), time.process_time()
         found = _search(scene, ref, clip, objects, (qpos0, qvel0), ref_figures, tried, gains, search)
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
-        if found is not None and (found[2]["valid"] or _went_wrong_at(found[2]) > _went_wrong_at(figures)):
+        if found is not None and _how_far(found[2]) > _how_far(figures):
             before = figures["reason"].split(";")[0]
             kept, roll, figures = found
             if not figures["valid"]:

@@ -57,18 +57,23 @@ class ClipResult:
     com: dict  # reference / planned / simulated CoM series for the plot
 
 
-def _in_range(result: ClipResult, fps: float) -> bool:
-    """Whether an invalid clip kept by ``--keep-invalid`` is within the dataset's value ranges
-    (:mod:`pipeline.dataset.ranges`), which the writer refuses a dataset for; one that is not is reported (its reason
-    says so) and not written. Why: a rollout that fell can fling a joint far past its stop (measured: the hand-made
-    teleport clip's wrist 0.75 rad past it), and one kept failure must not refuse the dataset of every valid clip."""
-    features, episodes = physicalized_clips_to_episodes([_physicalized(result)])
-    try:
-        check_ranges(validate_episode(features, episodes[0], result.source), fps, result.source)
-    except InputError as e:
-        result.figures["reason"] += f"; not written (--keep-invalid): {str(e).removeprefix(result.source + ': ')}"
-        return False
-    return True
+def _writable(kept: list[ClipResult], fps: float) -> list[ClipResult]:
+    """The clips of ``kept`` the dataset can hold: every valid one, and an invalid one kept by ``--keep-invalid``
+    only within the dataset's value ranges (:mod:`pipeline.dataset.ranges`, which the writer refuses a dataset for);
+    the reason of one that is not says so, and it is reported, not written. Why: a rollout that fell can fling a
+    joint far past its stop (measured: the hand-made teleport clip's wrist 0.75 rad past it), and one kept failure
+    must not refuse the dataset of every valid clip."""
+    writable = []
+    for r in kept:
+        if not r.figures["valid"]:
+            features, episodes = physicalized_clips_to_episodes([_physicalized(r)])
+            try:
+                check_ranges(validate_episode(features, episodes[0], r.source), fps, r.source)
+            except InputError as e:
+                r.figures["reason"] += f"; not written (--keep-invalid): {str(e).removeprefix(r.source + ': ')}"
+                continue
+        writable.append(r)
+    return writable
 
 
 def physicalize_one(
@@ -317,8 +322,7 @@ def run_stage(
     clips = episodes_to_robot_clips(src)
     simulate = partial(physicalize_one, teacher=teacher, profile=prof.name, search=search)
     results = run.map(simulate, list(enumerate(clips)), key=_clip_key, jobs=jobs, executor=executor, desc="physicalize")
-    kept = [r for r in results if r.robot is not None and (r.figures["valid"] or keep_invalid)]
-    kept = [r for r in kept if r.figures["valid"] or _in_range(r, clips[0].fps)]
+    kept = _writable([r for r in results if r.robot is not None and (r.figures["valid"] or keep_invalid)], clips[0].fps)
     report = _report(results, clips, spec, teacher, prof, keep_invalid, len(kept))
     for c in report["clips"]:
         if not c["valid"]:

@@ -169,14 +169,14 @@ def test_a_kept_failure_past_the_value_ranges_is_reported_not_written():
     with the reason and left out; the same failure within the ranges is written."""
     from dataclasses import replace
 
-    from physicalize.stage import _in_range
+    from physicalize.stage import _writable
 
     teleport = physicalize_one((1, _clips()[1]), search=None)
-    assert not teleport.figures["valid"] and _in_range(teleport, 50)
+    assert not teleport.figures["valid"] and _writable([teleport], 50) == [teleport]
     qpos = teleport.robot.qpos.copy()
     qpos[30, 7 + 19] = -2.72544  # left_wrist_roll_joint, range +-1.97 rad
     flung = replace(teleport, robot=replace(teleport.robot, qpos=qpos), figures=dict(teleport.figures))
-    assert not _in_range(flung, 50)
+    assert _writable([flung, teleport], 50) == [teleport]
     assert flung.figures["reason"].endswith(
         "; not written (--keep-invalid): frame 30: observation.state: element 26 is -2.72544: a joint past its range "
         "by more than 0.25 rad"
