@@ -31,9 +31,11 @@ track this module plans, per control frame ``t`` and hand ``k``:
   :attr:`GraspConfig.clearance` to an object gets its target moved out along the normal to that
   clearance, weight :attr:`GraspConfig.w_clear` (SitStand: the wrists lifted the chair 20 cm).
 * **the force the hands must apply** (:mod:`physicalize.grasp_force`): the object's inertia, its weight once
-  lifted and its sliding friction on its support, shared by the holding hands, each pressing its share into
-  the object far enough for friction to carry the rest (squeezing) or pushing it from one side; ramped in by
-  ``s(t)``; ``friction_ok`` records whether the plan is within the hands' friction cones.
+  lifted and its sliding friction on its support. Squeezing hands share it equally, each pressing its share into
+  the object far enough for friction to carry the rest; two hands pushing it along its support from one side
+  share it within their friction cones and so that their moment about the vertical through its centre of mass
+  turns it as its reference turns (a hand may press it into its support); ramped in by ``s(t)``; ``friction_ok``
+  records whether the plan is within the hands' friction cones.
 
 The controller (:class:`physicalize.wbc.WholeBodyController`) either puts the held object in its QP
 (:mod:`physicalize.object_loop`: the hand targets carried onto the measured object pose, the forces its own
@@ -57,7 +59,14 @@ import mujoco
 import numpy as np
 
 from physicalize.grasp_config import GraspConfig
-from physicalize.grasp_force import ObjectLoad, floor_friction, hand_force, hand_friction
+from physicalize.grasp_force import (
+    ObjectLoad,
+    floor_friction,
+    hand_force,
+    hand_friction,
+    inertia_zz,
+    press_allocation,
+)
 from physicalize.hand_reach import HandReach, ObjectTracks, hand_offsets, hand_reach
 from physicalize.object_loop import HeldObject
 from physicalize.object_motion import ObjectMotion
@@ -173,10 +182,10 @@ def grasp_schedule(
     vel = np.gradient(point, dt, axis=0) if T > 1 else np.zeros_like(point)
     acc = np.gradient(vel, dt, axis=0) if T > 2 else np.zeros_like(point)
     mu = _hold_friction(m, holds, objs)
-    force, friction_ok = _forces(m, holds, objs, normal, s, mu, ref.fps, cfg)
-    body = _held_bodies(holds, objs, T)
     indices = sorted(set(holds.key[held].tolist()))
     motions = {i: ObjectMotion.of(objs.pose(i)[:T], m.body_ipos[objs.bodies[i]], ref.fps) for i in indices}
+    force, friction_ok = _forces(m, holds, objs, motions, (attached, normal), s, mu, ref.fps, cfg)
+    body = _held_bodies(holds, objs, T)
     return GraspSchedule(
         hand_offsets(m),
         point,
@@ -332,25 +341,44 @@ def _forces(
     m: mujoco.MjModel,
     holds: _Holds,
     objs: ObjectTracks,
-    normal: np.ndarray,
+    motions: dict[int, ObjectMotion],
+    contact: tuple[np.ndarray, np.ndarray],
     s: np.ndarray,
     mu: float,
     fps: float,
     cfg: GraspConfig,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(force (T, 2, 3), friction_ok (T,))``: each holding hand's share of the force its object needs
-    (:mod:`physicalize.grasp_force`), ramped by ``s``, and whether every hand's is within friction."""
+    """``(force (T, 2, 3), friction_ok (T,))``: the force each holding hand applies to its object, ramped by ``s``,
+    and whether every hand's is within friction. The object needs ``F`` (:mod:`physicalize.grasp_force`); squeezing
+    hands and a hand alone take ``F / n_hands`` each (:func:`~physicalize.grasp_force.hand_force`); two hands
+    pushing an object along its support from one side (:meth:`~physicalize.grasp_force.ObjectLoad.slides`) share
+    ``F`` within their cones and so that they turn it as its reference turns, ``tau_z = I_zz alpha_z`` about its
+    centre of mass, pressing it into its support where that helps
+    (:func:`~physicalize.grasp_force.press_allocation`). Lifted or at rest the equal split stays: on lifted frames the
+    allocation put a table's weight on one wrist (sub2_largetable_003: 2.73x the wrist pitch's effort limit, rejected
+    `over torque`; with the equal split it is tracked).
+    ``contact``: the hand points on the object (T, 2, 3) and their inward normals (T, 2, 3)."""
     key, held, opposed = holds.key, holds.held, holds.opposed
+    point, normal = contact
     T = len(key)
     force, friction_ok = np.zeros((T, 2, 3)), np.ones(T, bool)
     for a, b, _ in label_runs(np.where(held.any(axis=1), np.where(held[:, 0], key[:, 0], key[:, 1]), -1)):
         i = int(key[a, 0] if held[a, 0] else key[a, 1])
         load = ObjectLoad.of(m, objs.bodies[i], objs.geoms[i], objs.pose(i)[:T, :3], a, fps, cfg)
+        motion, inertia = motions[i], inertia_zz(m, objs.bodies[i], motions[i].rot)
         for t in range(a, b):
             hands = [k for k in range(2) if key[t, k] == i]
-            share = load.force(t, opposed[t], cfg) / len(hands)
+            F = load.force(t, opposed[t], cfg)
+            if len(hands) == 2 and not opposed[t] and load.slides(t, cfg):
+                arms = point[t] - motion.com[t]
+                f, ok = press_allocation(
+                    F, inertia[t] * motion.alpha[t, 2], arms, normal[t], mu, cfg, load.support(t, cfg)
+                )
+                force[t] = s[t, :, None] * f
+                friction_ok[t] &= ok
+                continue
             for k in hands:
-                f_k, ok = hand_force(share, normal[t, k], mu, opposed[t], cfg)
+                f_k, ok = hand_force(F / len(hands), normal[t, k], mu, opposed[t], cfg)
                 force[t, k] = s[t, k] * f_k
                 friction_ok[t] &= ok
     return force, friction_ok

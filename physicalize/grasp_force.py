@@ -8,8 +8,9 @@ started, 1 once lifted), the hands must apply (:meth:`ObjectLoad.force`)
 (its inertia, its weight once lifted, its sliding friction on its support for the share ``r`` of its
 weight that still rests there; ``mu_s``: the object-floor friction by MuJoCo's mixing rule); a one-side
 lift carries only :attr:`~physicalize.grasp_config.GraspConfig.side_lift` of the weight (the far side still
-rests, and drags: ``r = 1 - side_lift lambda``; between squeezing hands ``r = 1 - lambda``). Each holding
-hand takes ``F_k = F / n_hands`` (:func:`hand_force`). Squeezing: the part along the surface,
+rests, and drags: ``r = 1 - side_lift lambda``; between squeezing hands ``r = 1 - lambda``). Squeezing hands
+and a hand alone take ``F_k = F / n_hands`` each (:func:`hand_force`); two hands pressing from one side share
+``F`` by :func:`press_allocation`. Squeezing: the part along the surface,
 ``F_t,k = F_k - (F_k . n_k) n_k``, must come from friction, so
 ``N_k = clip(max(N_min, safety |F_t,k| / mu), 0, N_max)`` and ``f_k = N_k n_k + F_k`` (:func:`normal_force`).
 Pressing from one side there is no squeeze to cancel: ``N_k = max(F_k . n_k, safety |F_t,k| / mu, 0)``,
@@ -30,12 +31,17 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from scipy.optimize import nnls
 
 from physicalize.grasp_config import GraspConfig
+from pipeline.rotations import quat_mat
 
 GRAVITY = 9.81
 # N: a planned force this far outside a friction cone still counts as inside (resting objects: numerical noise)
 FRICTION_TOL_N = 0.5
+# m: press_allocation weighs a moment error of this many N m as 1 N of force error (about half a box's width)
+MOMENT_ARM_M = 0.2
+PRESS_EPS = 1e-4  # press_allocation's pull towards the least force (per unit edge weight squared)
 
 
 def contact_friction(model: mujoco.MjModel, g1: int, g2: int) -> tuple[int, float]:
@@ -146,6 +152,22 @@ class ObjectLoad:
         lam = np.clip((pos[:, 2] - pos[start, 2]) / cfg.lift_blend, 0.0, 1.0)
         return cls(float(model.body_subtreemass[body]), floor_friction(model, geoms), v, a, lam)
 
+    def slides(self, t: int, cfg: GraspConfig) -> bool:
+        """At frame ``t`` the object is pushed along its support: not lifted, moving over ``slide_speed`` / 2."""
+        return bool(self.lam[t] < 1.0 and np.linalg.norm(self.v[t, :2]) > 0.5 * cfg.slide_speed)
+
+    def support(self, t: int, cfg: GraspConfig) -> np.ndarray:
+        """(m, 3) the directions of the force the support adds when a hand presses the object into it at frame
+        ``t``: none once lifted; while it slides (reference speed over ``slide_speed`` / 2), ``e_z - mu_s v/|v|``
+        (kinetic friction against the motion: the support cannot help push); slower, ``e_z`` alone (the support
+        takes a push down; its friction holds a resting object but never starts one moving)."""
+        if self.lam[t] >= 1.0:
+            return np.zeros((0, 3))
+        if self.slides(t, cfg):
+            v = self.v[t, :2] / np.linalg.norm(self.v[t, :2])
+            return np.r_[-self.floor_mu * v, 1.0][None]
+        return np.array([[0.0, 0.0, 1.0]])
+
     def force(self, t: int, squeezed: bool, cfg: GraspConfig) -> np.ndarray:
         """``F`` (3,) the hands must apply at frame ``t`` (module docstring), between squeezing hands or from
         one side."""
@@ -159,3 +181,61 @@ class ObjectLoad:
         if not squeezed:  # lifted from one side only: the far side still rests on its support
             F[2] -= (1 - cfg.side_lift) * lam * mass * (GRAVITY + a[2])
         return F
+
+
+def _cone_edges(n: np.ndarray, mu: float, sides: int = 8) -> np.ndarray:
+    """(sides, 3) the edges ``n + mu (cos a t_1 + sin a t_2)`` of a friction cone of inward normal ``n``."""
+    t1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(n, t1)
+    a = 2 * np.pi * np.arange(sides) / sides
+    return n + mu * (np.cos(a)[:, None] * t1 + np.sin(a)[:, None] * t2)
+
+
+def press_allocation(
+    F: np.ndarray,
+    tau_z: float,
+    arms: np.ndarray,
+    normals: np.ndarray,
+    mu: float,
+    cfg: GraspConfig,
+    support: np.ndarray | None = None,
+) -> tuple[np.ndarray, bool]:
+    """``(f (K, 3), ok)``: the forces of ``K`` hands pressing on one object from one side (inward ``normals``
+    (K, 3), friction ``mu``, points at ``arms`` (K, 3) from its centre of mass) that, with what its support adds,
+    sum to ``F`` and turn it about the vertical by ``tau_z``. Each ``f_k`` is a non-negative combination
+    ``E_k w_k`` of its cone's edges (:func:`_cone_edges`, friction ``mu / safety``), so no hand pulls or rubs past
+    its cone; the support adds any non-negative combination of its ``support`` edges (m, 3) (:meth:`ObjectLoad.support`:
+    a hand may press a resting object down, the floor takes it and its friction grows), acting under the centre of
+    mass (no moment about the vertical): ``min ||[E S] w - F||^2 + (M w - tau_z)^2 / l^2 + eps ||w||^2, w >= 0``
+    (non-negative least squares; ``M``: each hand edge's moment ``(r_k x e)_z``; ``l`` = :data:`MOMENT_ARM_M`: a
+    moment error of ``l`` N m weighs as 1 N). An equal split (``F / K`` each) turns the object whenever the hands
+    are not placed symmetrically about its centre of mass, and leaves a hand's cone wherever the hands face
+    different ways (sub8_largebox_001, one hand on the lid, one on a side: 98% of its held frames against 0% for
+    the hands and floor together). Where the reduced cones cannot give ``F`` the full ones (``mu``) are tried;
+    ``ok``: ``F`` is met within :data:`FRICTION_TOL_N` + 5% of ``|F|``; each ``|f_k|`` is capped at
+    ``max_hand_force``."""
+    K, scale, tol = len(normals), 1.0 / MOMENT_ARM_M, FRICTION_TOL_N + 0.05 * float(np.linalg.norm(F))
+    S = np.zeros((0, 3)) if support is None else np.asarray(support, float).reshape(-1, 3)
+    for cone in (mu / cfg.safety, mu):
+        E = [_cone_edges(n, cone) for n in normals]  # K x (8, 3)
+        V = np.concatenate(E + [S]).T  # (3, 8K + m)
+        M = np.r_[np.concatenate([np.cross(arms[k], E[k])[:, 2] for k in range(K)]), np.zeros(len(S))]
+        A = np.vstack([V, scale * M, np.sqrt(PRESS_EPS) * np.eye(V.shape[1])])
+        w, _ = nnls(A, np.r_[F, scale * tau_z, np.zeros(V.shape[1])])
+        ok = float(np.linalg.norm(V @ w - F)) <= tol
+        if ok:
+            break
+    f = np.stack([w[8 * k : 8 * k + 8] @ E[k] for k in range(K)])
+    norms = np.linalg.norm(f, axis=1)
+    over = norms > cfg.max_hand_force
+    f[over] *= (cfg.max_hand_force / norms[over])[:, None]
+    return f, ok and not over.any()
+
+
+def inertia_zz(m: mujoco.MjModel, body: int, rot: np.ndarray) -> np.ndarray:
+    """(T,) the object's moment of inertia about the vertical through its centre of mass, at orientations ``rot``
+    (T, 3, 3): ``e_z^T R R_i diag(I) R_i^T R^T e_z``."""
+    Ri = quat_mat(m.body_iquat[body])
+    z = rot[:, 2, :] @ Ri  # (T, 3): e_z in the principal frame
+    return (z**2) @ m.body_inertia[body]

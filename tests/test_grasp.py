@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from physicalize.grasp import GraspConfig, grasp_schedule
-from physicalize.grasp_force import contact_friction, normal_force, press_force
+from physicalize.grasp_force import contact_friction, hand_force, normal_force, press_allocation, press_force
 from physicalize.hand_reach import hand_offsets
 from physicalize.object_loop import LoopGains
 from physicalize.reference import build_reference, place_on_floor
@@ -187,6 +187,30 @@ def test_a_pressing_hand_pushes_and_lifts_but_cannot_pull():
     edge = np.array([0.0, -0.87, 0.49]) / np.linalg.norm([0.0, -0.87, 0.49])
     f, ok = press_force(np.array([0.0, 3.9, 4.9]), edge, mu, cfg)
     assert not ok and f[1] < 0  # what it can do instead pushes the table away
+
+
+def test_two_pressing_hands_share_the_push_so_that_the_box_does_not_turn():
+    """Two hands pressing from one side share the force by their places and cones, not half each: off-centre on
+    the back face the hand nearer the centre of mass pushes harder (equal halves would turn the box by 1 N m);
+    one hand on the back and one on a side face, the back hand pushes (half each leaves the side hand's cone); a
+    pull is out of reach and flagged, with no hand pulling."""
+    cfg, mu = GraspConfig(), 0.8
+    back = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    arms = np.array([[-0.1, 0.05, 0.0], [-0.1, -0.15, 0.0]])
+    F = np.array([20.0, 0.0, 0.0])
+    f, ok = press_allocation(F, 0.0, arms, back, mu, cfg)
+    assert ok and np.allclose(f.sum(axis=0), F, atol=0.5)
+    assert abs(np.cross(arms, f)[:, 2].sum()) < 0.1 and f[0, 0] > 2 * f[1, 0] > 0
+    assert np.cross(arms, np.stack([F / 2, F / 2]))[:, 2].sum() == pytest.approx(1.0)
+    f, ok = press_allocation(F, 0.5, arms, back, mu, cfg)  # the reference turns it: the moment follows
+    assert ok and np.cross(arms, f)[:, 2].sum() == pytest.approx(0.5, abs=0.1)
+    side = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    arms = np.array([[-0.1, 0.0, 0.0], [0.0, -0.12, 0.0]])
+    f, ok = press_allocation(F, 0.0, arms, side, mu, cfg)
+    assert ok and np.allclose(f[0], F, atol=0.5) and np.linalg.norm(f[1]) < 0.5
+    assert not hand_force(F / 2, side[1], mu, False, cfg)[1]  # half each: the side hand would rub past its cone
+    f, ok = press_allocation(-F, 0.0, arms, back, mu, cfg)
+    assert not ok and (np.einsum("ki,ki->k", f, back) >= -1e-9).all()
 
 
 def test_schedule_squeezes_opposite_sides_of_the_box(scene):
