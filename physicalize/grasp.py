@@ -31,11 +31,12 @@ track this module plans, per control frame ``t`` and hand ``k``:
   :attr:`GraspConfig.clearance` to an object gets its target moved out along the normal to that
   clearance, weight :attr:`GraspConfig.w_clear` (SitStand: the wrists lifted the chair 20 cm).
 * **the force the hands must apply** (:mod:`physicalize.grasp_force`): the object's inertia, its weight once
-  lifted and its sliding friction on its support. Squeezing hands share it equally, each pressing its share into
-  the object far enough for friction to carry the rest; two hands pushing it along its support from one side
-  share it within their friction cones and so that their moment about the vertical through its centre of mass
-  turns it as its reference turns (a hand may press it into its support); ramped in by ``s(t)``; ``friction_ok``
-  records whether the plan is within the hands' friction cones.
+  lifted and its sliding friction on its support, shared equally by the holding hands, each pressing its share
+  into the object far enough for friction to carry the rest (squeezing) or pushing it from one side; where an
+  equal share leaves a hand's friction cone while two hands push it along its support, they share it within their
+  cones and so that their moment about the vertical through its centre of mass turns it as its reference turns (a
+  hand may press it into its support); ramped in by ``s(t)``; ``friction_ok`` records whether the plan is within
+  the hands' friction cones.
 
 The controller (:class:`physicalize.wbc.WholeBodyController`) either puts the held object in its QP
 (:mod:`physicalize.object_loop`: the hand targets carried onto the measured object pose, the forces its own
@@ -349,14 +350,15 @@ def _forces(
     cfg: GraspConfig,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(force (T, 2, 3), friction_ok (T,))``: the force each holding hand applies to its object, ramped by ``s``,
-    and whether every hand's is within friction. The object needs ``F`` (:mod:`physicalize.grasp_force`); squeezing
-    hands and a hand alone take ``F / n_hands`` each (:func:`~physicalize.grasp_force.hand_force`); two hands
-    pushing an object along its support from one side (:meth:`~physicalize.grasp_force.ObjectLoad.slides`) share
-    ``F`` within their cones and so that they turn it as its reference turns, ``tau_z = I_zz alpha_z`` about its
-    centre of mass, pressing it into its support where that helps
-    (:func:`~physicalize.grasp_force.press_allocation`). Lifted or at rest the equal split stays: on lifted frames the
-    allocation put a table's weight on one wrist (sub2_largetable_003: 2.73x the wrist pitch's effort limit, rejected
-    `over torque`; with the equal split it is tracked).
+    and whether every hand's is within friction. The object needs ``F`` (:mod:`physicalize.grasp_force`); the
+    holding hands take ``F / n_hands`` each (:func:`~physicalize.grasp_force.hand_force`). Where that leaves a cone
+    while two hands push the object along its support from one side
+    (:meth:`~physicalize.grasp_force.ObjectLoad.slides`; a hand on the lid, one on a side) they share ``F`` within
+    their cones instead, turning it as its reference turns (``tau_z = I_zz alpha_z`` about its centre of mass) and
+    pressing it into its support where that helps (:func:`~physicalize.grasp_force.press_allocation`). Only there:
+    allocating wherever two hands push moved the default Push's forces off its equal split (9.6 / 27.3 N for
+    18.4 / 18.4) and its teacher's root accuracy from > 0.9 to 0.83; on lifted frames it put a table's weight on
+    one wrist (sub2_largetable_003: 2.73x the wrist pitch's effort limit, rejected `over torque`).
     ``contact``: the hand points on the object (T, 2, 3) and their inward normals (T, 2, 3)."""
     key, held, opposed = holds.key, holds.held, holds.opposed
     point, normal = contact
@@ -369,16 +371,12 @@ def _forces(
         for t in range(a, b):
             hands = [k for k in range(2) if key[t, k] == i]
             F = load.force(t, opposed[t], cfg)
-            if len(hands) == 2 and not opposed[t] and load.slides(t, cfg):
-                arms = point[t] - motion.com[t]
-                f, ok = press_allocation(
-                    F, inertia[t] * motion.alpha[t, 2], arms, normal[t], mu, cfg, load.support(t, cfg)
-                )
-                force[t] = s[t, :, None] * f
-                friction_ok[t] &= ok
-                continue
-            for k in hands:
-                f_k, ok = hand_force(F / len(hands), normal[t, k], mu, opposed[t], cfg)
+            split = [hand_force(F / len(hands), normal[t, k], mu, opposed[t], cfg) for k in hands]
+            if len(hands) == 2 and not opposed[t] and load.slides(t, cfg) and not all(ok for _, ok in split):
+                arms, support = point[t] - motion.com[t], load.support(t, cfg)
+                f, ok = press_allocation(F, inertia[t] * motion.alpha[t, 2], arms, normal[t], mu, cfg, support)
+                split = list(zip(f, [ok, ok]))
+            for k, (f_k, ok) in zip(hands, split):
                 force[t, k] = s[t, k] * f_k
                 friction_ok[t] &= ok
     return force, friction_ok

@@ -9,8 +9,8 @@ started, 1 once lifted), the hands must apply (:meth:`ObjectLoad.force`)
 weight that still rests there; ``mu_s``: the object-floor friction by MuJoCo's mixing rule); a one-side
 lift carries only :attr:`~physicalize.grasp_config.GraspConfig.side_lift` of the weight (the far side still
 rests, and drags: ``r = 1 - side_lift lambda``; between squeezing hands ``r = 1 - lambda``). Squeezing hands
-and a hand alone take ``F_k = F / n_hands`` each (:func:`hand_force`); two hands pressing from one side share
-``F`` by :func:`press_allocation`. Squeezing: the part along the surface,
+and a hand alone take ``F_k = F / n_hands`` each (:func:`hand_force`); two hands pushing from one side too, except
+where that leaves a cone: then they share ``F`` by :func:`press_allocation`. Squeezing: the part along the surface,
 ``F_t,k = F_k - (F_k . n_k) n_k``, must come from friction, so
 ``N_k = clip(max(N_min, safety |F_t,k| / mu), 0, N_max)`` and ``f_k = N_k n_k + F_k`` (:func:`normal_force`).
 Pressing from one side there is no squeeze to cancel: ``N_k = max(F_k . n_k, safety |F_t,k| / mu, 0)``,
