@@ -45,7 +45,7 @@ from scipy.optimize import nnls
 
 from physicalize.grasp import GraspSchedule, hand_labels
 from physicalize.grasp_config import GraspConfig
-from physicalize.grasp_force import floor_friction
+from physicalize.grasp_force import cone_edges, floor_friction
 from physicalize.hand_reach import ObjectTracks, hand_reach
 from pipeline.take import SLIDE, SMALL_MOVE, mean_opposition
 
@@ -61,17 +61,6 @@ GAP_SEARCH_M = 1.0  # distances are searched up to this (farther counts as this)
 SQUEEZE_OPPOSITION = -0.5  # n_l . n_r below this over the two-handed frames: a squeeze
 OUT_OF_REACH, OVER_TORQUE, NEEDS_A_GRIP = "out of reach", "over torque", "needs a grip"
 NEVER_REJECTED = (SLIDE, SMALL_MOVE)  # the floor carries the object: the hands push it or barely move it
-DIRECTIONS = 8  # tangent directions of a friction cone's edges
-
-
-def cone_edges(n: np.ndarray, mu: float, k: int = DIRECTIONS) -> np.ndarray:
-    """(k, 3) edges of the friction cone about the unit normal ``n`` (inscribed polygon): ``n + mu t_i``."""
-    a = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
-    t1 = np.cross(n, a)
-    t1 /= np.linalg.norm(t1)
-    t2 = np.cross(n, t1)
-    ang = 2 * np.pi * np.arange(k) / k
-    return n[None] + mu * (np.cos(ang)[:, None] * t1[None] + np.sin(ang)[:, None] * t2[None])
 
 
 def producible(force: np.ndarray, edges: np.ndarray) -> bool:

@@ -42,6 +42,7 @@ FRICTION_TOL_N = 0.5
 # m: press_allocation weighs a moment error of this many N m as 1 N of force error (about half a box's width)
 MOMENT_ARM_M = 0.2
 PRESS_EPS = 1e-4  # press_allocation's pull towards the least force (per unit edge weight squared)
+DIRECTIONS = 8  # tangent directions of a friction cone's edges
 
 
 def contact_friction(model: mujoco.MjModel, g1: int, g2: int) -> tuple[int, float]:
@@ -183,13 +184,14 @@ class ObjectLoad:
         return F
 
 
-def _cone_edges(n: np.ndarray, mu: float, sides: int = 8) -> np.ndarray:
-    """(sides, 3) the edges ``n + mu (cos a t_1 + sin a t_2)`` of a friction cone of inward normal ``n``."""
-    t1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+def cone_edges(n: np.ndarray, mu: float, k: int = DIRECTIONS) -> np.ndarray:
+    """(k, 3) edges of the friction cone about the unit normal ``n`` (inscribed polygon): ``n + mu t_i``."""
+    a = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
+    t1 = np.cross(n, a)
     t1 /= np.linalg.norm(t1)
     t2 = np.cross(n, t1)
-    a = 2 * np.pi * np.arange(sides) / sides
-    return n + mu * (np.cos(a)[:, None] * t1 + np.sin(a)[:, None] * t2)
+    ang = 2 * np.pi * np.arange(k) / k
+    return n[None] + mu * (np.cos(ang)[:, None] * t1[None] + np.sin(ang)[:, None] * t2[None])
 
 
 def press_allocation(
@@ -204,7 +206,7 @@ def press_allocation(
     """``(f (K, 3), ok)``: the forces of ``K`` hands pressing on one object from one side (inward ``normals``
     (K, 3), friction ``mu``, points at ``arms`` (K, 3) from its centre of mass) that, with what its support adds,
     sum to ``F`` and turn it about the vertical by ``tau_z``. Each ``f_k`` is a non-negative combination
-    ``E_k w_k`` of its cone's edges (:func:`_cone_edges`, friction ``mu / safety``), so no hand pulls or rubs past
+    ``E_k w_k`` of its cone's edges (:func:`cone_edges`, friction ``mu / safety``), so no hand pulls or rubs past
     its cone; the support adds any non-negative combination of its ``support`` edges (m, 3) (:meth:`ObjectLoad.support`:
     a hand may press a resting object down, the floor takes it and its friction grows), acting under the centre of
     mass (no moment about the vertical): ``min ||[E S] w - F||^2 + (M w - tau_z)^2 / l^2 + eps ||w||^2, w >= 0``
@@ -218,15 +220,15 @@ def press_allocation(
     K, scale, tol = len(normals), 1.0 / MOMENT_ARM_M, FRICTION_TOL_N + 0.05 * float(np.linalg.norm(F))
     S = np.zeros((0, 3)) if support is None else np.asarray(support, float).reshape(-1, 3)
     for cone in (mu / cfg.safety, mu):
-        E = [_cone_edges(n, cone) for n in normals]  # K x (8, 3)
-        V = np.concatenate(E + [S]).T  # (3, 8K + m)
+        E = [cone_edges(n, cone) for n in normals]  # K x (DIRECTIONS, 3)
+        V = np.concatenate(E + [S]).T  # (3, DIRECTIONS K + m)
         M = np.r_[np.concatenate([np.cross(arms[k], E[k])[:, 2] for k in range(K)]), np.zeros(len(S))]
         A = np.vstack([V, scale * M, np.sqrt(PRESS_EPS) * np.eye(V.shape[1])])
         w, _ = nnls(A, np.r_[F, scale * tau_z, np.zeros(V.shape[1])])
         ok = float(np.linalg.norm(V @ w - F)) <= tol
         if ok:
             break
-    f = np.stack([w[8 * k : 8 * k + 8] @ E[k] for k in range(K)])
+    f = np.stack([w[DIRECTIONS * k : DIRECTIONS * (k + 1)] @ E[k] for k in range(K)])
     norms = np.linalg.norm(f, axis=1)
     over = norms > cfg.max_hand_force
     f[over] *= (cfg.max_hand_force / norms[over])[:, None]

@@ -6,13 +6,13 @@ import pytest
 
 from physicalize.feasibility import (
     REJECT_MIN_S,
-    cone_edges,
     hold_feasibility,
     producible,
     reach_figures,
     rejection,
     rejection_reason,
 )
+from physicalize.grasp_force import cone_edges
 from physicalize.reference import build_reference, place_on_floor
 from physicalize.static_torque import static_torque_figures
 from pipeline.geometry import ObjectPhysics, Primitive
