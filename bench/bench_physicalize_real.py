@@ -23,7 +23,9 @@ loop), ``rejected`` over all clips (<= 0.35), the speed of the physicalize pass 
 over the clips it tracked to the end (>= 2; retargeting is timed apart), and the yield:
 valid frames (50 Hz, the robot clip's) per core-hour, ``3600 * sum(frames of the valid clips) /
 sum(retarget + physicalize CPU-seconds of every clip)``, rejected and failed ones included (their CPU is spent
-too). Clips run in ``--jobs`` worker processes (one clip per process at a time: timings are per core).
+too). Clips run in ``--jobs`` worker processes (one clip per process at a time: timings are per core); with fewer
+clips than jobs, each clip's search spreads its children over the idle ones (:mod:`physicalize.search.children`; the
+same verdicts, and their CPU-seconds count).
 ``--json`` keeps every clip's figures. ``--sensitivity`` adds a row per end of the physics ranges: every take
 again with its objects' mass, hand and floor friction at the low, then at the high end of its kind's ranges
 (:mod:`pipeline.materials`): how much of the result rests on the table's nominal values.
@@ -50,6 +52,7 @@ import numpy as np  # noqa: E402
 
 from physicalize.clip import physicalize_clip, robot_alone  # noqa: E402
 from physicalize.search.beam import SearchConfig  # noqa: E402
+from physicalize.stage import search_workers  # noqa: E402
 from pipeline.materials import object_physics_for  # noqa: E402
 from pipeline.readers import read_clips  # noqa: E402
 from pipeline.stage.executor import map_ordered  # noqa: E402
@@ -94,10 +97,13 @@ def with_physics(human, end: str):
     return replace(human, objects=tuple(objects))
 
 
-def run_clip(path: Path, end: str = "nominal", robot_only: bool = False, search: SearchConfig | None = SEARCH) -> dict:
+def run_clip(
+    path: Path, end: str = "nominal", robot_only: bool = False, search: SearchConfig | None = SEARCH, workers: int = 1
+) -> dict:
     """Retarget and physicalize one clip file, its objects' physics at ``end`` of their ranges (``robot_only``: its
     body motion alone, :func:`physicalize.clip.robot_alone`), with the ``search`` where the teacher falls (None: no
-    search); its figures, verdict (and the verdict before the search, ``verdict_before``) and timings."""
+    search; its children in ``workers`` processes, whose CPU-seconds count); its figures, verdict (and the verdict
+    before the search, ``verdict_before``) and timings."""
     row = {"clip": path.name, "folder": path.parent.name, "object": object_kind(path), "kind": "unread"}
     stage, c0 = "retarget_cpu_s", time.process_time()
     try:
@@ -114,8 +120,9 @@ def run_clip(path: Path, end: str = "nominal", robot_only: bool = False, search:
         row["opposition_human"] = robot.provenance.get("human_hand_opposition")
         row["opposition_g1"] = g1_hand_opposition(human, robot)
         stage, c0 = "physicalize_cpu_s", time.process_time()
-        _, roll, figures, _ = physicalize_clip(robot_alone(robot) if robot_only else robot, search=search)
-        row["physicalize_cpu_s"] = time.process_time() - c0
+        body = robot_alone(robot) if robot_only else robot
+        _, roll, figures, _ = physicalize_clip(body, search=search, search_workers=workers)
+        row["physicalize_cpu_s"] = time.process_time() - c0 + figures.get("search", {}).get("worker_cpu_s", 0.0)
         row["seconds"] = robot.frames / robot.fps
     except Exception as exc:  # noqa: BLE001 - a clip that raises is a row of the table, not the end of the bench
         row.setdefault(stage, time.process_time() - c0)  # the CPU it spent counts against the yield
@@ -261,7 +268,7 @@ def main() -> None:
     if not args.search_budget >= 0:
         ap.error(f"--search-budget: must be >= 0 (0: no search), got {args.search_budget:g}")
     search = replace(SEARCH, children_per_s=args.search_budget) if args.search_budget > 0 else None
-    run = partial(run_clip, robot_only=args.robot_only, search=search)
+    run = partial(run_clip, robot_only=args.robot_only, search=search, workers=search_workers(args.jobs, len(files)))
     rows = map_ordered(run, files, jobs=args.jobs, desc="real clips")
     print(
         f"{'clip':28s}{'object':12s}{'kind':11s}{'rise':>6s}{'trav':>6s}{'s':>6s}{'rt/core':>9s}{'opp':>12s}"

@@ -190,26 +190,28 @@ def _traces(scene, ref, roll: Rollout, touch_force: float, clip: RobotClip, obje
     return figures
 
 
-def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, gains, config: SearchConfig):
+def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, gains, config: SearchConfig, workers=1):
     """``(gain set, rollout, figures)`` of the search (:mod:`physicalize.search.beam`) from the gain set whose rollout
     fell last: up to ``config.attempts`` searches (seeds ``config.seed``, ``+ 1``, ...) sharing the budget
     (:attr:`~physicalize.search.beam.SearchConfig.children_per_s`) until one's rollout is valid, else the one that
     went wrong last (:func:`_how_far`; the earlier on a tie: a later attempt has less budget left: on
     ``sub2_woodchair_002`` at 120 the third searched three segments and stood no longer than the teacher); its
     figures carry ``search``: where it started, its segments, the children and CPU-seconds of every attempt, and the
-    verdict before and after. None when no tried rollout fell."""
+    verdict before and after (its CPU-seconds: of the ``workers`` processes its children ran in too). None when no
+    tried rollout fell."""
     fell = [(k, r, f) for k, r, f in tried if r.fell_at is not None]
     if not fell:
         return None
     index, nominal, before = max(fell, key=lambda x: x[1].fell_at)
     make = partial(WholeBodyController, scene.model, scene.profile, gains[index])
-    budget, spent, children, frames = beam.frame_budget(config, ref.frames, clip.fps), 0.0, 0, 0
+    budget, spent, children, frames, remote = beam.frame_budget(config, ref.frames, clip.fps), 0.0, 0, 0, 0.0
     best = None
     for attempt in range(config.attempts):
         share, left = replace(config, seed=config.seed + attempt), budget - frames
-        kw = {"contact_links": clip.contact_links, "objects": objects, "max_frames": left}
+        kw = {"contact_links": clip.contact_links, "objects": objects, "max_frames": left, "workers": workers}
         result = beam.search(scene, ref, make, *state0, nominal, share, **kw)
         spent, children, frames = spent + result.cpu_s, children + result.children, frames + result.frames
+        remote += result.worker_cpu_s
         now = _figures(scene, result.rollout, clip, objects, *state0, None, ref_figures)
         if best is None or _how_far(now) > _how_far(best[1]):
             best = result, now
@@ -225,6 +227,7 @@ def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, ga
         "children": children,
         "frames": frames,
         "cpu_s": spent,
+        "worker_cpu_s": remote,
         "failure_before": before["failure"],
         "failure_after": figures["failure"],
         "reason_after": figures["reason"],
@@ -256,6 +259,7 @@ def physicalize_clip(
     grasp: bool = True,
     gains: tuple[WBCConfig, ...] | None = None,
     search: SearchConfig | None = SearchConfig(),
+    search_workers: int = 1,
 ) -> tuple[RobotClip | None, Rollout | None, dict, dict]:
     """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
     ``reference`` (see :func:`physicalize.problem.tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`).
@@ -271,7 +275,8 @@ def physicalize_clip(
     the end and only losing the object). ``figures`` name the set
     kept (``teacher_gains``, its index) and how many ran (``teacher_attempts``); timings count them all. The
     object loop's sets run only on a clip whose hands hold something (else they are the open loop's sets again).
-    A residual teacher runs the first set only (its policy was trained on it)."""
+    A residual teacher runs the first set only (its policy was trained on it). ``search_workers``: the processes the
+    search's children run in (:mod:`physicalize.search.children`; the same result for any number)."""
     spec = parse_teacher(teacher)
     residual = None if spec.checkpoint is None else load_residual(str(spec.checkpoint), spec.digest)
     gains = (TEACHER_GAINS if gains is None else tuple(gains))[: 1 if residual is not None else None]
@@ -312,7 +317,8 @@ def physicalize_clip(
         figures["reason"] += "".join(f"; gain set {k}: {f['reason'].split(';')[0]}" for k, f in others)
     if not figures["valid"] and search is not None and residual is None and perturb is None:
         t0, cpu0 = time.perf_counter(), time.process_time()
-        found = _search(scene, ref, clip, objects, (qpos0, qvel0), ref_figures, tried, gains, search)
+        state0 = (qpos0, qvel0)
+        found = _search(scene, ref, clip, objects, state0, ref_figures, tried, gains, search, search_workers)
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
         if found is not None and _how_far(found[2]) > _how_far(figures):
             before = figures["reason"].split(";")[0]

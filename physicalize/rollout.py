@@ -181,10 +181,14 @@ class Tracker:
         return Snapshot(self.t, state, self.controller.state(), len(self.rec["qpos"]), self.fails, self.fell_at)
 
     def restore(self, snap: Snapshot) -> None:
+        """Back to ``snap``, this tracker's or a copy's (a search's worker, :mod:`physicalize.search.children`): the
+        frames recorded from its frame on are dropped; those before it that this tracker never recorded are None
+        (what a restored tracker's readers read is what it records after the restore)."""
         mujoco.mj_setState(self.model, self.data, snap.physics, mujoco.mjtState.mjSTATE_INTEGRATION)
         self.controller.set_state(snap.controller)
         for v in self.rec.values():
             del v[snap.recorded :]
+            v.extend([None] * (snap.recorded - len(v)))
         self.t, self.fails, self.fell_at = snap.t, snap.fails, snap.fell_at
 
     def rollout(self) -> Rollout:

@@ -77,12 +77,17 @@ def _writable(kept: list[ClipResult], fps: float) -> list[ClipResult]:
 
 
 def physicalize_one(
-    item: tuple[int, RobotClip], teacher: str = "base", profile: str = "mjlab", search: SearchConfig | None = None
+    item: tuple[int, RobotClip],
+    teacher: str = "base",
+    profile: str = "mjlab",
+    search: SearchConfig | None = None,
+    search_workers: int = 1,
 ) -> ClipResult:
     """:func:`physicalize_clip` of the ``(index, clip)`` item with the ``search`` where the teacher falls (None: no
-    search); a clip that raises is invalid, with its error."""
+    search; its children in ``search_workers`` processes); a clip that raises is invalid, with its error."""
     index, clip = item
-    run = kinematic_clip if teacher == "kinematic" else partial(physicalize_clip, teacher=teacher, search=search)
+    kw = {"teacher": teacher, "search": search, "search_workers": search_workers}
+    run = kinematic_clip if teacher == "kinematic" else partial(physicalize_clip, **kw)
     try:
         robot, roll, figures, com = run(clip, profile=profile)
     except Exception as exc:  # noqa: BLE001 - a clip that cannot be simulated is reported, the batch goes on
@@ -146,6 +151,13 @@ def run_fingerprint(src: Path, spec: TeacherSpec, profile: str, keep_invalid: bo
         keep_invalid=keep_invalid,
         search=None if search is None else asdict(search),
     )
+
+
+def search_workers(jobs: int, clips: int, executor: str = "local") -> int:
+    """The processes each clip's search spreads its children over (:mod:`physicalize.search.children`): the jobs
+    the clips leave idle, ``jobs // clips`` (at least 1), so that ``--jobs`` cores are busy however few clips there
+    are; 1 on Ray, whose tasks each hold one CPU."""
+    return 1 if executor != "local" else max(1, jobs // max(clips, 1))
 
 
 def search_config(budget: float | None) -> SearchConfig | None:
@@ -320,7 +332,8 @@ def run_stage(
     run.begin(overwrite)
     t0 = time.perf_counter()
     clips = episodes_to_robot_clips(src)
-    simulate = partial(physicalize_one, teacher=teacher, profile=prof.name, search=search)
+    workers = search_workers(jobs, len(clips), executor)
+    simulate = partial(physicalize_one, teacher=teacher, profile=prof.name, search=search, search_workers=workers)
     results = run.map(simulate, list(enumerate(clips)), key=_clip_key, jobs=jobs, executor=executor, desc="physicalize")
     kept = _writable([r for r in results if r.robot is not None and (r.figures["valid"] or keep_invalid)], clips[0].fps)
     report = _report(results, clips, spec, teacher, prof, keep_invalid, len(kept))

@@ -67,7 +67,7 @@ def test_the_guided_reference_fades_its_offsets_in_and_out():
 def test_nothing_is_searched_where_nothing_fell():
     scene, ref, (q0, v0) = _stand_problem(40)
     nominal = simulate(scene, ref, _controller(scene), q0, v0)
-    assert nominal.fell_at is None and drift_onset(ref, nominal) == nominal.frames
+    assert nominal.fell_at is None and drift_onset(ref, nominal.qpos, nominal.fell_at) == nominal.frames
     assert search(scene, ref, lambda: _controller(scene), q0, v0, nominal) is None
 
 
@@ -90,7 +90,7 @@ def test_the_search_skips_what_the_teacher_walks_unaided():
             assert (s, next_check) == (ref.frames, ref.frames) and beam == [best]
             continue
         shoved = simulate(scene, ref, _controller(scene), q0, v0, perturb=perturb)
-        onset = drift_onset(ref, shoved, since=40)
+        onset = drift_onset(ref, shoved.qpos[40:], shoved.fell_at, since=40)
         assert shoved.fell_at is not None and 100 <= onset < shoved.fell_at
         assert (s, next_check) == (onset - 25, onset) and beam[0].snapshot.t == s and beam[0].segments == ()
     assert frame_budget(SearchConfig(children_per_s=10.0), 100, 50) == 20 * 50  # 2 s: 20 children of 25 + 25 frames

@@ -12,6 +12,9 @@ reference, :mod:`physicalize.balance`), segment by segment of :attr:`SearchConfi
   :attr:`SearchConfig.lookahead_s`, and scored by :func:`cost`;
 * the :attr:`SearchConfig.beam` cheapest children are the next elites.
 
+A step's children run in this process or over worker processes (:mod:`physicalize.search.children`: the offsets are
+drawn here, in one order, so the result is the same for any number of workers).
+
 Then the best elite's segments are re-simulated from frame 0 in a fresh tracker (the same arithmetic, so the same
 rollout), to be validated as every rollout is. Where the best elite stands clean over its segment and lookahead, its
 continuation is simulated to the end and the search resumes only where that continuation drifts (:func:`_skip_ahead`).
@@ -35,6 +38,7 @@ from physicalize.balance import DRIFT_M
 from physicalize.object_trace import OBJECT_DRIFT_M
 from physicalize.reference import Reference
 from physicalize.rollout import Rollout, Snapshot, Tracker
+from physicalize.search.children import Children
 from physicalize.search.guide import GuidedReference, Segment
 from physicalize.validate import LIMIT_TOL, OBJECT_LOST_M, Bars
 from physicalize.wbc import WholeBodyController
@@ -94,7 +98,8 @@ class SearchResult:
 
     rollout: Rollout
     segments: tuple[Segment, ...]
-    cpu_s: float
+    cpu_s: float  # of every process the search ran in
+    worker_cpu_s: float  # of those its children ran in (physicalize.search.children; 0 with none)
     children: int
     frames: int  # control frames simulated by the search (its children, continuations and skips; not the re-run)
     start: int
@@ -107,16 +112,22 @@ def frame_budget(config: SearchConfig, frames: int, fps: float) -> int:
     return int(config.children_per_s * frames / fps) * per_child
 
 
-def drift_onset(ref: Reference, roll: Rollout, objects: tuple[tuple[int, np.ndarray], ...] = (), since: int = 0) -> int:
-    """First frame of ``roll`` from ``since`` on whose pelvis is :data:`physicalize.balance.DRIFT_M` off ``ref``'s or
-    an object :data:`OBJECT_DRIFT_M` off its reference track (``objects``: (qpos address, track) pairs); else the
-    fall (else the end)."""
-    err = np.linalg.norm(roll.qpos[:, :2] - ref.qpos[: roll.frames, :2], axis=1) > DRIFT_M
+def drift_onset(
+    ref: Reference,
+    qpos: np.ndarray,
+    fell_at: int | None,
+    objects: tuple[tuple[int, np.ndarray], ...] = (),
+    since: int = 0,
+) -> int:
+    """First frame from ``since`` on whose pelvis is :data:`physicalize.balance.DRIFT_M` off ``ref``'s or an object
+    :data:`OBJECT_DRIFT_M` off its reference track (``objects``: (qpos address, track) pairs); else the fall ``fell_at``
+    (else the end). ``qpos``: the rollout's frames ``since, since + 1, ...`` (what a restored tracker recorded)."""
+    stop = since + len(qpos)
+    err = np.linalg.norm(qpos[:, :2] - ref.qpos[since:stop, :2], axis=1) > DRIFT_M
     for adr, track in objects:
-        err |= np.linalg.norm(roll.qpos[:, adr : adr + 3] - track[: roll.frames, :3], axis=1) > OBJECT_DRIFT_M
-    err[:since] = False
+        err |= np.linalg.norm(qpos[:, adr : adr + 3] - track[since:stop, :3], axis=1) > OBJECT_DRIFT_M
     far = np.flatnonzero(err)
-    return int(far[0]) if far.size else (roll.fell_at or roll.frames)
+    return since + int(far[0]) if far.size else (fell_at or stop)
 
 
 @dataclass(frozen=True)
@@ -180,7 +191,7 @@ def _skip_ahead(
     tracker.run(T)
     if tracker.fell_at is None and tracker.t >= T and scorer.cost(tracker, s0, T, Segment(s0, T)) < BAR_COST:
         return [best], T, T
-    onset = drift_onset(ref, tracker.rollout(), scorer.objects, since=s0)
+    onset = drift_onset(ref, np.asarray(tracker.rec["qpos"][s0:]), tracker.fell_at, scorer.objects, since=s0)
     resume = onset - start_before
     if resume <= s0:
         return beam, s0, onset
@@ -201,10 +212,12 @@ def search(
     contact_links: tuple[str, ...] = (),
     objects: dict[str, np.ndarray] | None = None,
     max_frames: int | None = None,
+    workers: int = 1,
 ) -> SearchResult | None:
     """The module docstring's search from the ``nominal`` rollout's drift onset; None when it did not fall.
     ``objects``: the objects' reference tracks ({name: (T, 7)}), whose loss the children's cost counts;
-    ``max_frames``: its budget of simulated control frames (default :func:`frame_budget`)."""
+    ``max_frames``: its budget of simulated control frames (default :func:`frame_budget`); ``workers``: processes
+    the children are simulated in (:mod:`physicalize.search.children`; the same result for any number)."""
     if nominal.fell_at is None:
         return None
     cpu0, fps, T = time.process_time(), ref.fps, ref.frames
@@ -212,7 +225,7 @@ def search(
     ramp = int(round(config.ramp_s * fps))
     scorer = Scorer.of(scene, ref, objects)
     start_before = int(round(config.start_before_s * fps))
-    start = max(0, drift_onset(ref, nominal, scorer.objects) - start_before)
+    start = max(0, drift_onset(ref, nominal.qpos, nominal.fell_at, scorer.objects) - start_before)
     rng = np.random.default_rng(config.seed)
     sigma = np.array([config.com_sigma_m] * 2 + [config.step_sigma_m] * 2)
     held_sigma = np.array([config.hands_sigma_m] * 3 + [config.press_sigma])
@@ -220,29 +233,28 @@ def search(
     tracker.run(start)
     beam, children, s, next_check = [Elite(tracker.snapshot(), (), 0.0)], 0, start, 0
     budget = frame_budget(config, T, fps) if max_frames is None else max_frames
-    while s < T and tracker.steps < budget:
-        stop = min(s + L, T)
-        offspring = []
-        for elite in beam:
-            for c in range(config.children):
-                seg = Segment(s, stop)
-                if c:
-                    theta = rng.normal(0.0, sigma)
-                    held = rng.normal(0.0, held_sigma) if scorer.objects else np.zeros(4)
-                    seg = Segment(s, stop, tuple(theta[:2]), tuple(theta[2:]), tuple(held[:3]), float(held[3]))
-                tracker.restore(elite.snapshot)
-                tracker.ref = GuidedReference(ref, elite.segments + (seg,), ramp)
-                tracker.run(stop)
-                snap = tracker.snapshot()
-                tracker.run(stop + H)
-                offspring.append(Elite(snap, elite.segments + (seg,), scorer.cost(tracker, s, stop + H, seg)))
-                children += 1
-        beam = sorted(offspring, key=lambda e: e.cost)[: config.beam]
-        s = stop
-        if beam[0].cost < BAR_COST and next_check <= s < T:  # the best stands clean: search on where it fails
-            beam, s, next_check = _skip_ahead(tracker, ref, beam, scorer, ramp, start_before, T)
+    with Children(tracker, scorer, ramp, H, workers) as pool:
+        while s < T and tracker.steps + pool.frames < budget:
+            stop = min(s + L, T)
+            jobs = []
+            for elite in beam:
+                for c in range(config.children):
+                    seg = Segment(s, stop)
+                    if c:
+                        theta = rng.normal(0.0, sigma)
+                        held = rng.normal(0.0, held_sigma) if scorer.objects else np.zeros(4)
+                        seg = Segment(s, stop, tuple(theta[:2]), tuple(theta[2:]), tuple(held[:3]), float(held[3]))
+                    jobs.append((elite.snapshot, elite.segments + (seg,)))
+            offspring = [Elite(snap, segs, cost) for (_, segs), (snap, cost) in zip(jobs, pool.run(jobs))]
+            children += len(offspring)
+            beam = sorted(offspring, key=lambda e: e.cost)[: config.beam]
+            s = stop
+            if beam[0].cost < BAR_COST and next_check <= s < T:  # the best stands clean: search on where it fails
+                beam, s, next_check = _skip_ahead(tracker, ref, beam, scorer, ramp, start_before, T)
+        frames, remote_cpu = tracker.steps + pool.frames, pool.cpu_s
     best = beam[0].segments
     guided = GuidedReference(ref, best, ramp)
     final = Tracker(scene, guided, make_controller(), qpos0, qvel0, contact_links=contact_links)
     final.run(T)
-    return SearchResult(final.rollout(), best, time.process_time() - cpu0, children, tracker.steps, start)
+    cpu_s = time.process_time() - cpu0 + remote_cpu
+    return SearchResult(final.rollout(), best, cpu_s, remote_cpu, children, frames, start)
