@@ -113,7 +113,7 @@ subset: install
 	$(CLI) subset --name $(CORPUS) --out $(SUBSET) --variants $(VARIANTS) $(if $(OVERWRITE),--overwrite)
 
 # Train I (paper Sec. III-B): the DF VAE, behaviour cloning on the corpus, DAgger from the QP teacher, into runs/$(RUN)/.
-# Laptop scale by default (2 CPU cores, ~55 min on the 100-clip corpus: VAE + BC ~8 min, 20 DAgger iterations ~2.3 min
+# Laptop scale by default (2 CPU cores, ~52 min on the 100-clip corpus: VAE + BC ~6 min, 26 DAgger iterations ~1.75 min
 # each, then policy.pt: the mean of the last three iterations' weights; TRAIN_ARGS="--select-episodes 12" chooses
 # the three by validation rollouts instead, ~5 min more: train/evaluation/select.py); resumable, and
 # TRAIN_ARGS="--dagger-iterations 40" continues a finished run; TRAIN_ARGS for more, e.g.
