@@ -12,7 +12,7 @@ from pipeline.terms.layout import HISTORY
 @dataclass(frozen=True)
 class TrainConfig:
     """A run's settings. The defaults are the laptop scale (~52 min on 2 CPU cores on the 100-clip corpus;
-    26 DAgger iterations, not 20: every training seed's Carry >= 10% against 4-12%, README, Train I)."""
+    26 DAgger iterations, the last six drawing every task equally: README, Train I)."""
 
     name: str = "corpus"  # the corpus: datasets/<name>/{features,physicalized,retargeted}
     backbone: str = "transformer"
