@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from bench_scripts import load
 from mocap_paths import SHARED_MOCAP, needs_shared
+from standing import standing_qpos
 
 from physicalize.balance import _zmp_outside, balance_figures, reference_balance_figures
 from physicalize.clip import physicalize_clip, robot_alone
@@ -29,7 +30,7 @@ TRACE_KEYS = (
 
 
 def _stand(frames: int = 100) -> RobotClip:
-    stand = place_on_floor(build_scene().model, np.repeat(default_qpos(actuator_profile("mjlab"))[None], frames, 0))
+    stand = standing_qpos(frames)
     box = np.tile([0.8, 0.0, 0.15, 1.0, 0.0, 0.0, 0.0], (frames, 1))
     contacts = np.zeros((frames, 1), bool)
     contacts[60:, 0] = True

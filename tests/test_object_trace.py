@@ -2,21 +2,19 @@
 MuJoCo beside a box whose reference track moves away (and turns) while nothing pushes it."""
 
 import numpy as np
+from standing import standing_qpos
 
 from physicalize.clip import physicalize_clip
 from physicalize.object_trace import OBJECT_DRIFT_M, hand_columns
-from physicalize.reference import place_on_floor
 from pipeline.clip import ObjectTrack, RobotClip
 from pipeline.geometry import Primitive
-from pipeline.robot import actuator_profile, default_qpos
 from pipeline.rotations import yaw_of
-from pipeline.scene import build_scene
 
 
 def _stand_beside_a_box(turn_deg: float, frames: int = 100) -> RobotClip:
     """The G1 standing; a box 0.8 m ahead whose track slides 0.3 m further away over frames 40-70 while turning by
     ``turn_deg``; no hand is labelled on it."""
-    stand = place_on_floor(build_scene().model, np.repeat(default_qpos(actuator_profile("mjlab"))[None], frames, 0))
+    stand = standing_qpos(frames)
     s = np.clip((np.arange(frames) - 40) / 30, 0.0, 1.0)
     yaw = np.radians(turn_deg) * s
     box = np.zeros((frames, 7))

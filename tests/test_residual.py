@@ -7,24 +7,22 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
+from standing import standing_qpos
 
 from lessmimic.cli import main
 from physicalize.clip import parse_teacher, physicalize_clip
 from physicalize.problem import tracking_problem
-from physicalize.reference import place_on_floor
 from physicalize.residual import ResidualConfig, ResidualEnv, ResidualPolicy, observe, train_residual
 from physicalize.rollout import initial_state, replay, simulate
 from physicalize.wbc import WholeBodyController
 from pipeline.clip import RobotClip
 from pipeline.errors import InputError
-from pipeline.robot import actuator_profile, default_qpos
-from pipeline.scene import build_scene
 
 SMOKE = ResidualConfig(num_steps_per_env=8, hidden_dims=(32, 32), num_mini_batches=2, num_learning_epochs=2)
 
 
 def _standing_clip(frames: int = 60) -> RobotClip:
-    q = place_on_floor(build_scene().model, np.repeat(default_qpos(actuator_profile("mjlab"))[None], frames, 0))
+    q = standing_qpos(frames)
     return RobotClip(q, 50, "hand-made:stand", task="stand")
 
 

@@ -5,26 +5,15 @@ settings as one-line errors (real MuJoCo, the real QP teacher)."""
 import numpy as np
 import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
+from standing import stand_problem
 
 from physicalize.clip import physicalize_clip, robot_alone
-from physicalize.problem import tracking_problem
-from physicalize.reference import place_on_floor
-from physicalize.rollout import Tracker, initial_state, simulate
+from physicalize.rollout import Tracker, simulate
 from physicalize.search.beam import Elite, Scorer, SearchConfig, _skip_ahead, drift_onset, frame_budget, search
 from physicalize.search.guide import GuidedReference, Segment, fade
 from physicalize.stage import search_config
 from physicalize.wbc import WholeBodyController
-from pipeline.clip import RobotClip
 from pipeline.errors import InputError
-from pipeline.robot import actuator_profile, default_qpos
-from pipeline.scene import build_scene
-
-
-def _stand_problem(frames: int = 80):
-    q = place_on_floor(build_scene().model, np.repeat(default_qpos(actuator_profile("mjlab"))[None], frames, 0))
-    clip = RobotClip(q, 50, "hand-made:stand")
-    scene, ref, objects, _ = tracking_problem(clip)
-    return scene, ref, initial_state(scene, ref, objects)
 
 
 def _controller(scene):
@@ -34,7 +23,7 @@ def _controller(scene):
 def test_a_restored_tracker_continues_bit_for_bit():
     """Snapshot at frame 30, another continuation (a guided reference) to 60, restore: the run to 60 equals a run
     that never branched, in every recorded array, and the controller's state is back too."""
-    scene, ref, (q0, v0) = _stand_problem()
+    scene, ref, (q0, v0) = stand_problem()
     straight = simulate(scene, ref, _controller(scene), q0, v0)
     tracker = Tracker(scene, ref, _controller(scene), q0, v0)
     tracker.run(30)
@@ -55,7 +44,7 @@ def test_the_guided_reference_fades_its_offsets_in_and_out():
     w, dw = fade(40, 10, 20, 4)
     assert w[:10].max() == 0.0 and np.allclose(w[14:20], 1.0) and w[24:].max() == 0.0
     assert 0.0 < w[12] < 1.0 and dw[12] > 0 and dw[22] < 0
-    _, ref, _ = _stand_problem(40)
+    _, ref, _ = stand_problem(40)
     guided = GuidedReference(ref, (Segment(10, 20, (0.1, 0.0), (0.0, 0.05)),), 4)
     assert guided.frames == ref.frames and guided.qpos is ref.qpos  # everything else is the reference's
     a, b = ref.target(16), guided.target(16)
@@ -65,7 +54,7 @@ def test_the_guided_reference_fades_its_offsets_in_and_out():
 
 
 def test_nothing_is_searched_where_nothing_fell():
-    scene, ref, (q0, v0) = _stand_problem(40)
+    scene, ref, (q0, v0) = stand_problem(40)
     nominal = simulate(scene, ref, _controller(scene), q0, v0)
     assert nominal.fell_at is None and drift_onset(ref, nominal.qpos, nominal.fell_at) == nominal.frames
     assert search(scene, ref, lambda: _controller(scene), q0, v0, nominal) is None
@@ -75,7 +64,7 @@ def test_the_search_skips_what_the_teacher_walks_unaided():
     """A beam whose best stands clean: with a continuation that stands to the end the search is done; with one that a
     shove at frame 100 topples, it resumes ``start_before`` frames before that continuation's drift onset, from the
     best elite advanced there alone (the shove is a test's ``perturb``: the search itself never pushes)."""
-    scene, ref, (q0, v0) = _stand_problem(160)
+    scene, ref, (q0, v0) = stand_problem(160)
     scorer = Scorer.of(scene, ref)
     for shove, done in ((0.0, True), (400.0, False)):
 

@@ -4,23 +4,13 @@ workers as in one process (real MuJoCo, the real QP teacher)."""
 
 import numpy as np
 import pytest
+from standing import stand_problem
 
-from physicalize.problem import tracking_problem
-from physicalize.reference import place_on_floor
-from physicalize.rollout import Tracker, initial_state, simulate
+from physicalize.rollout import Tracker, simulate
 from physicalize.search.beam import SearchConfig, search
 from physicalize.search.children import Children
 from physicalize.stage import search_workers
 from physicalize.wbc import WholeBodyController
-from pipeline.clip import RobotClip
-from pipeline.robot import actuator_profile, default_qpos
-from pipeline.scene import build_scene
-
-
-def _stand_problem(frames: int):
-    q = place_on_floor(build_scene().model, np.repeat(default_qpos(actuator_profile("mjlab"))[None], frames, 0))
-    scene, ref, objects, _ = tracking_problem(RobotClip(q, 50, "hand-made:stand"))
-    return scene, ref, initial_state(scene, ref, objects)
 
 
 def _shove(t, d):
@@ -30,7 +20,7 @@ def _shove(t, d):
 def test_a_tracker_restored_from_another_trackers_snapshot_continues_as_that_one():
     """A fresh tracker restored to another's frame 30 records frames 30-60 exactly as the other does; the frames
     before the restore it never recorded are None (nothing it reads after the restore)."""
-    scene, ref, (q0, v0) = _stand_problem(60)
+    scene, ref, (q0, v0) = stand_problem(60)
     first = Tracker(scene, ref, WholeBodyController(scene.model, scene.profile), q0, v0)
     first.run(30)
     snap = first.snapshot()
@@ -47,7 +37,7 @@ def test_the_search_is_the_same_in_worker_processes_as_here():
     """From a shoved nominal rollout's drift onset, the search with its children in two forked workers picks the
     same segments, re-simulates the same rollout and spends the same frames as in one process; the workers'
     CPU-seconds are counted."""
-    scene, ref, (q0, v0) = _stand_problem(120)
+    scene, ref, (q0, v0) = stand_problem(120)
     nominal = simulate(scene, ref, WholeBodyController(scene.model, scene.profile), q0, v0, perturb=_shove)
     assert nominal.fell_at is not None
 
@@ -65,7 +55,7 @@ def test_the_search_is_the_same_in_worker_processes_as_here():
 def test_workers_follow_the_idle_jobs_and_bad_counts_are_one_line_errors():
     assert [search_workers(8, n) for n in (1, 3, 8, 20)] == [8, 2, 1, 1]
     assert search_workers(8, 1, "ray") == 1
-    scene, ref, (q0, v0) = _stand_problem(10)
+    scene, ref, (q0, v0) = stand_problem(10)
     tracker = Tracker(scene, ref, WholeBodyController(scene.model, scene.profile), q0, v0)
     with pytest.raises(ValueError, match=r"search workers: must be >= 1, got 0"):
         Children(tracker, None, 5, 25, workers=0)
