@@ -113,10 +113,11 @@ subset: install
 	$(CLI) subset --name $(CORPUS) --out $(SUBSET) --variants $(VARIANTS) $(if $(OVERWRITE),--overwrite)
 
 # Train I (paper Sec. III-B): the DF VAE, behaviour cloning on the corpus, DAgger from the QP teacher, into runs/$(RUN)/.
-# Laptop scale by default (2 CPU cores, ~52 min on the 100-clip corpus: VAE + BC ~6 min, 26 DAgger iterations ~1.75 min
-# each, then policy.pt: the mean of the last three iterations' weights; TRAIN_ARGS="--select-episodes 12" chooses
-# the three by validation rollouts instead, ~5 min more: train/evaluation/select.py); resumable, and
-# TRAIN_ARGS="--dagger-iterations 40" continues a finished run; TRAIN_ARGS for more, e.g.
+# Laptop scale by default (2 CPU cores, ~58 min on the 100-clip corpus: VAE + BC ~6 min, 26 DAgger iterations ~1.75 min
+# each, the last six ~2.7 min with refits twice as long, then policy.pt: the mean of the last three iterations'
+# weights; TRAIN_ARGS="--select-episodes 12" chooses the three by validation rollouts instead, ~5 min more:
+# train/evaluation/select.py); resumable, and TRAIN_ARGS="--dagger-iterations 40" continues a finished run;
+# TRAIN_ARGS for more, e.g.
 # TRAIN_ARGS="--bc-steps 200000 --device cuda". `make eval` scores the run's policy and the QP teacher baseline
 # (Table 2 cells, 3 evaluation seeds x 16 episodes per cell, each with its 95% interval) into runs/$(RUN)/eval/.
 RUN ?= bc

@@ -294,8 +294,9 @@ def test_one_dagger_iteration_logs_labels_and_resumes(corpus, tmp_path):
 
 def test_dagger_draws_more_of_the_tasks_the_student_fails(corpus):
     """The next iteration's task weights follow the last one's failures (mixture and probe together), never below
-    the floor, until ``uniform_from``, then are equal; the draw keeps to them and cycles through a task's episodes."""
-    from train.dagger import DAggerConfig, draw_episodes, iteration_weights, task_weights
+    the floor, until ``uniform_from``, then are equal (and the refits longer); the draw keeps to them and cycles through
+    a task's episodes."""
+    from train.dagger import DAggerConfig, draw_episodes, iteration_weights, refit_steps, task_weights
 
     tasks = ["Carry", "PickUp", "Push", "SitStand"]
     row = {"tasks": {"PickUp": [3, 4], "SitStand": [0, 3]}, "student": {"tasks": {"SitStand": [0, 1], "Push": [2, 2]}}}
@@ -305,6 +306,7 @@ def test_dagger_draws_more_of_the_tasks_the_student_fails(corpus):
     config = DAggerConfig(uniform_from=3)
     np.testing.assert_array_equal(iteration_weights(tasks, row, 2, config), w)
     np.testing.assert_allclose(iteration_weights(tasks, row, 3, config), 0.25)
+    assert [refit_steps(i, DAggerConfig(uniform_from=3, fit_steps=100)) for i in (2, 3, 9)] == [100, 200, 200]
     only_sit = draw_episodes(corpus, 3, np.array([0.0, 0.0, 0.0, 1.0]), tasks, np.random.default_rng(0))
     assert [e.task for e in only_sit] == ["SitStand"] * 3 and only_sit[0] is only_sit[1]  # one SitStand episode
 
