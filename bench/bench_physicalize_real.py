@@ -28,7 +28,9 @@ clips than jobs, each clip's search spreads its children over the idle ones (:mo
 same verdicts, and their CPU-seconds count).
 ``--json`` keeps every clip's figures. ``--sensitivity`` adds a row per end of the physics ranges: every take
 again with its objects' mass, hand and floor friction at the low, then at the high end of its kind's ranges
-(:mod:`pipeline.materials`): how much of the result rests on the table's nominal values.
+(:mod:`pipeline.materials`): how much of the result rests on the table's nominal values. ``--guide S`` holds every
+object on its track by a virtual wrench at scale ``S`` in every rollout, the search's included
+(:mod:`physicalize.guidance`): what the robot does when the object goes where the reference says (never valid).
 
 Run: ``make bench-physicalize-real [FOLDERS="a b"] [JOBS=2] [BENCH_ARGS=--sensitivity]``.
 """
@@ -98,11 +100,17 @@ def with_physics(human, end: str):
 
 
 def run_clip(
-    path: Path, end: str = "nominal", robot_only: bool = False, search: SearchConfig | None = SEARCH, workers: int = 1
+    path: Path,
+    end: str = "nominal",
+    robot_only: bool = False,
+    search: SearchConfig | None = SEARCH,
+    workers: int = 1,
+    guide: float = 0.0,
 ) -> dict:
     """Retarget and physicalize one clip file, its objects' physics at ``end`` of their ranges (``robot_only``: its
     body motion alone, :func:`physicalize.clip.robot_alone`), with the ``search`` where the teacher falls (None: no
-    search; its children in ``workers`` processes, whose CPU-seconds count); its figures, verdict (and the verdict
+    search; its children in ``workers`` processes, whose CPU-seconds count), ``guide``: the objects held on their
+    tracks at that scale (:mod:`physicalize.guidance`; 0: not); its figures, verdict (and the verdict
     before the search, ``verdict_before``) and timings."""
     row = {"clip": path.name, "folder": path.parent.name, "object": object_kind(path), "kind": "unread"}
     stage, c0 = "retarget_cpu_s", time.process_time()
@@ -121,7 +129,7 @@ def run_clip(
         row["opposition_g1"] = g1_hand_opposition(human, robot)
         stage, c0 = "physicalize_cpu_s", time.process_time()
         body = robot_alone(robot) if robot_only else robot
-        _, roll, figures, _ = physicalize_clip(body, search=search, search_workers=workers)
+        _, roll, figures, _ = physicalize_clip(body, search=search, search_workers=workers, guide=guide)
         row["physicalize_cpu_s"] = time.process_time() - c0 + figures.get("search", {}).get("worker_cpu_s", 0.0)
         row["seconds"] = robot.frames / robot.fps
     except Exception as exc:  # noqa: BLE001 - a clip that raises is a row of the table, not the end of the bench
@@ -260,6 +268,13 @@ def main() -> None:
         default=SEARCH.children_per_s,
         help=f"search children per second of motion where the teacher falls (0: none; {SEARCH.children_per_s:g})",
     )
+    ap.add_argument(
+        "--guide",
+        type=float,
+        default=0.0,
+        help="hold every object on its track by a virtual wrench at this scale (physicalize/guidance.py; 0: none): "
+        "what the rollout does with the object where the reference says; a guided take is never valid",
+    )
     args = ap.parse_args()
     files = clip_files(args.folders)
     t0 = time.perf_counter()
@@ -267,8 +282,11 @@ def main() -> None:
         ap.error("--robot-only and --sensitivity: the physics ranges are the objects'; choose one")
     if not args.search_budget >= 0:
         ap.error(f"--search-budget: must be >= 0 (0: no search), got {args.search_budget:g}")
+    if not args.guide >= 0:
+        ap.error(f"--guide: must be >= 0 (0: no guidance), got {args.guide:g}")
     search = replace(SEARCH, children_per_s=args.search_budget) if args.search_budget > 0 else None
-    run = partial(run_clip, robot_only=args.robot_only, search=search, workers=search_workers(args.jobs, len(files)))
+    workers = search_workers(args.jobs, len(files))
+    run = partial(run_clip, robot_only=args.robot_only, search=search, workers=workers, guide=args.guide)
     rows = map_ordered(run, files, jobs=args.jobs, desc="real clips")
     print(
         f"{'clip':28s}{'object':12s}{'kind':11s}{'rise':>6s}{'trav':>6s}{'s':>6s}{'rt/core':>9s}{'opp':>12s}"

@@ -24,6 +24,7 @@ from physicalize.feasibility import (
     rejection,
     rejection_reason,
 )
+from physicalize.guidance import ObjectGuidance
 from physicalize.object_trace import object_trace_figures
 from physicalize.payload import capped, held_objects, load_scale
 from physicalize.problem import object_qpos, tracking_problem
@@ -190,7 +191,9 @@ def _traces(scene, ref, roll: Rollout, touch_force: float, clip: RobotClip, obje
     return figures
 
 
-def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, gains, config: SearchConfig, workers=1):
+def _search(
+    scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, gains, config: SearchConfig, workers=1, guide=None
+):
     """``(gain set, rollout, figures)`` of the search (:mod:`physicalize.search.beam`) from the gain set whose rollout
     fell last: up to ``config.attempts`` searches (seeds ``config.seed``, ``+ 1``, ...) sharing the budget
     (:attr:`~physicalize.search.beam.SearchConfig.children_per_s`) until one's rollout is valid, else the one that
@@ -209,10 +212,11 @@ def _search(scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, ga
     for attempt in range(config.attempts):
         share, left = replace(config, seed=config.seed + attempt), budget - frames
         kw = {"contact_links": clip.contact_links, "objects": objects, "max_frames": left, "workers": workers}
+        kw["perturb"] = guide
         result = beam.search(scene, ref, make, *state0, nominal, share, **kw)
         spent, children, frames = spent + result.cpu_s, children + result.children, frames + result.frames
         remote += result.worker_cpu_s
-        now = _figures(scene, result.rollout, clip, objects, *state0, None, ref_figures)
+        now = _figures(scene, result.rollout, clip, objects, *state0, guide, ref_figures)
         if best is None or _how_far(now) > _how_far(best[1]):
             best = result, now
         if now["valid"] or frames >= budget:
@@ -260,6 +264,7 @@ def physicalize_clip(
     gains: tuple[WBCConfig, ...] | None = None,
     search: SearchConfig | None = SearchConfig(),
     search_workers: int = 1,
+    guide: float = 0.0,
 ) -> tuple[RobotClip | None, Rollout | None, dict, dict]:
     """(simulated clip, rollout, validity figures, CoM series) of one retargeted clip tracking the
     ``reference`` (see :func:`physicalize.problem.tracking_problem`) with the ``teacher`` (see :func:`parse_teacher`).
@@ -276,7 +281,12 @@ def physicalize_clip(
     kept (``teacher_gains``, its index) and how many ran (``teacher_attempts``); timings count them all. The
     object loop's sets run only on a clip whose hands hold something (else they are the open loop's sets again).
     A residual teacher runs the first set only (its policy was trained on it). ``search_workers``: the processes the
-    search's children run in (:mod:`physicalize.search.children`; the same result for any number)."""
+    search's children run in (:mod:`physicalize.search.children`; the same result for any number). ``guide`` > 0:
+    every rollout, the search's included, with the objects held on their tracks by
+    :class:`physicalize.guidance.ObjectGuidance` at that scale (a measurement: such a clip fails the external force
+    bar, so it is never valid)."""
+    if guide < 0:
+        raise ValueError(f"object guidance scale must be >= 0, got {guide}")
     spec = parse_teacher(teacher)
     residual = None if spec.checkpoint is None else load_residual(str(spec.checkpoint), spec.digest)
     gains = (TEACHER_GAINS if gains is None else tuple(gains))[: 1 if residual is not None else None]
@@ -295,6 +305,8 @@ def physicalize_clip(
     if (rejected := rejection(ref_figures[0])) is not None:
         return None, None, _rejected(ref_figures[0], rejected), {}
     ref_figures[0].update(reference_balance_figures(ref, zmp))  # the same for every rollout: once
+    if guide > 0:
+        perturb = ObjectGuidance.of(scene, objects, clip.fps, guide)
     holds = ref.grasp is not None and bool(ref.grasp.grasped.any())
     tried = []
     for index, config in enumerate(gains):
@@ -315,10 +327,11 @@ def physicalize_clip(
     if not figures["valid"] and len(tried) > 1:
         others = [(k, f) for k, _, f in tried if k != kept]
         figures["reason"] += "".join(f"; gain set {k}: {f['reason'].split(';')[0]}" for k, f in others)
-    if not figures["valid"] and search is not None and residual is None and perturb is None:
+    if not figures["valid"] and search is not None and residual is None and (perturb is None or guide > 0):
         t0, cpu0 = time.perf_counter(), time.process_time()
         state0 = (qpos0, qvel0)
-        found = _search(scene, ref, clip, objects, state0, ref_figures, tried, gains, search, search_workers)
+        guided = perturb if guide > 0 else None
+        found = _search(scene, ref, clip, objects, state0, ref_figures, tried, gains, search, search_workers, guided)
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
         if found is not None and _how_far(found[2]) > _how_far(figures):
             before = figures["reason"].split(";")[0]
@@ -328,6 +341,8 @@ def physicalize_clip(
         elif found is not None:  # the search's best went wrong sooner: the tried rollout stays, with what was searched
             figures = {**figures, "search": found[2]["search"]}
     figures["teacher_gains"], figures["teacher_attempts"] = kept, len(tried)
+    if guide > 0:
+        figures["object_guidance"] = {"scale": guide, "peak_n": perturb.peak_n}
     figures["start_prefix_s"] = prefix_frames(clip) / clip.fps
     roll.seconds = wall
     figures["realtime_factor"] = roll.frames / clip.fps / max(wall, 1e-9)

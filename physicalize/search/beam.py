@@ -32,6 +32,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
 from physicalize.balance import DRIFT_M
@@ -213,11 +214,13 @@ def search(
     objects: dict[str, np.ndarray] | None = None,
     max_frames: int | None = None,
     workers: int = 1,
+    perturb: Callable[[int, mujoco.MjData], None] | None = None,
 ) -> SearchResult | None:
     """The module docstring's search from the ``nominal`` rollout's drift onset; None when it did not fall.
     ``objects``: the objects' reference tracks ({name: (T, 7)}), whose loss the children's cost counts;
     ``max_frames``: its budget of simulated control frames (default :func:`frame_budget`); ``workers``: processes
-    the children are simulated in (:mod:`physicalize.search.children`; the same result for any number)."""
+    the children are simulated in (:mod:`physicalize.search.children`; the same result for any number);
+    ``perturb``: every tracker's (:class:`physicalize.guidance.ObjectGuidance`, a measurement, never data)."""
     if nominal.fell_at is None:
         return None
     cpu0, fps, T = time.process_time(), ref.fps, ref.frames
@@ -229,7 +232,7 @@ def search(
     rng = np.random.default_rng(config.seed)
     sigma = np.array([config.com_sigma_m] * 2 + [config.step_sigma_m] * 2)
     held_sigma = np.array([config.hands_sigma_m] * 3 + [config.press_sigma])
-    tracker = Tracker(scene, ref, make_controller(), qpos0, qvel0, contact_links=contact_links)
+    tracker = Tracker(scene, ref, make_controller(), qpos0, qvel0, contact_links=contact_links, perturb=perturb)
     tracker.run(start)
     beam, children, s, next_check = [Elite(tracker.snapshot(), (), 0.0)], 0, start, 0
     budget = frame_budget(config, T, fps) if max_frames is None else max_frames
@@ -254,7 +257,7 @@ def search(
         frames, remote_cpu = tracker.steps + pool.frames, pool.cpu_s
     best = beam[0].segments
     guided = GuidedReference(ref, best, ramp)
-    final = Tracker(scene, guided, make_controller(), qpos0, qvel0, contact_links=contact_links)
+    final = Tracker(scene, guided, make_controller(), qpos0, qvel0, contact_links=contact_links, perturb=perturb)
     final.run(T)
     cpu_s = time.process_time() - cpu0 + remote_cpu
     return SearchResult(final.rollout(), best, cpu_s, remote_cpu, children, frames, start)
