@@ -192,7 +192,7 @@ def _traces(scene, ref, roll: Rollout, touch_force: float, clip: RobotClip, obje
 
 
 def _search(
-    scene, ref, clip: RobotClip, objects, state0, ref_figures, tried, gains, config: SearchConfig, workers=1, guide=None
+    scene, ref, clip, objects, state0, ref_figures, tried, gains, config: SearchConfig, workers=1, perturb=None
 ):
     """``(gain set, rollout, figures)`` of the search (:mod:`physicalize.search.beam`) from the gain set whose rollout
     fell last: up to ``config.attempts`` searches (seeds ``config.seed``, ``+ 1``, ...) sharing the budget
@@ -200,8 +200,8 @@ def _search(
     went wrong last (:func:`_how_far`; the earlier on a tie: a later attempt has less budget left: on
     ``sub2_woodchair_002`` at 120 the third searched three segments and stood no longer than the teacher); its
     figures carry ``search``: where it started, its segments, the children and CPU-seconds of every attempt, and the
-    verdict before and after (its CPU-seconds: of the ``workers`` processes its children ran in too). None when no
-    tried rollout fell."""
+    verdict before and after (its CPU-seconds: of the ``workers`` processes its children ran in too); ``perturb``: every
+    tracker's (the object guidance, :mod:`physicalize.guidance`). None when no tried rollout fell."""
     fell = [(k, r, f) for k, r, f in tried if r.fell_at is not None]
     if not fell:
         return None
@@ -212,11 +212,11 @@ def _search(
     for attempt in range(config.attempts):
         share, left = replace(config, seed=config.seed + attempt), budget - frames
         kw = {"contact_links": clip.contact_links, "objects": objects, "max_frames": left, "workers": workers}
-        kw["perturb"] = guide
+        kw["perturb"] = perturb
         result = beam.search(scene, ref, make, *state0, nominal, share, **kw)
         spent, children, frames = spent + result.cpu_s, children + result.children, frames + result.frames
         remote += result.worker_cpu_s
-        now = _figures(scene, result.rollout, clip, objects, *state0, guide, ref_figures)
+        now = _figures(scene, result.rollout, clip, objects, *state0, perturb, ref_figures)
         if best is None or _how_far(now) > _how_far(best[1]):
             best = result, now
         if now["valid"] or frames >= budget:
@@ -330,8 +330,7 @@ def physicalize_clip(
     if not figures["valid"] and search is not None and residual is None and (perturb is None or guide > 0):
         t0, cpu0 = time.perf_counter(), time.process_time()
         state0 = (qpos0, qvel0)
-        guided = perturb if guide > 0 else None
-        found = _search(scene, ref, clip, objects, state0, ref_figures, tried, gains, search, search_workers, guided)
+        found = _search(scene, ref, clip, objects, state0, ref_figures, tried, gains, search, search_workers, perturb)
         wall, cpu = wall + time.perf_counter() - t0, cpu + time.process_time() - cpu0
         if found is not None and _how_far(found[2]) > _how_far(figures):
             before = figures["reason"].split(";")[0]
