@@ -11,8 +11,8 @@ from pipeline.terms.layout import HISTORY
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """A run's settings. The defaults are the laptop scale (~52 min on 2 CPU cores on the 100-clip corpus;
-    26 DAgger iterations, the last six drawing every task equally: README, Train I)."""
+    """A run's settings. The defaults are the laptop scale (~58 min on 2 CPU cores on the 100-clip corpus;
+    26 DAgger iterations, the last six drawing every task equally with refits twice as long: README, Train I)."""
 
     name: str = "corpus"  # the corpus: datasets/<name>/{features,physicalized,retargeted}
     backbone: str = "transformer"
