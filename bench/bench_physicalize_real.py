@@ -30,8 +30,7 @@ same verdicts, and their CPU-seconds count).
 again with its objects' mass, hand and floor friction at the low, then at the high end of its kind's ranges
 (:mod:`pipeline.materials`): how much of the result rests on the table's nominal values. ``--guide S`` holds every
 object on its track by a virtual wrench at scale ``S`` in every rollout, the search's included
-(:mod:`physicalize.guidance`): what the robot does when the object goes where the reference says (never valid);
-``--anneal`` searches with that guidance annealed to none (:mod:`physicalize.search.anneal`), the data pass unguided.
+(:mod:`physicalize.guidance`): what the robot does when the object goes where the reference says (never valid).
 
 Run: ``make bench-physicalize-real [FOLDERS="a b"] [JOBS=2] [BENCH_ARGS=--sensitivity]``.
 """
@@ -54,7 +53,6 @@ torch.set_num_threads(1)
 import numpy as np  # noqa: E402
 
 from physicalize.clip import physicalize_clip, robot_alone  # noqa: E402
-from physicalize.search.anneal import LEVELS  # noqa: E402
 from physicalize.search.beam import SearchConfig  # noqa: E402
 from physicalize.stage import search_workers  # noqa: E402
 from pipeline.materials import object_physics_for  # noqa: E402
@@ -184,19 +182,6 @@ OBJECT_TRACE = (
 )
 
 
-def level_line(levels: list[dict]) -> str:
-    """The annealed search's levels (:mod:`physicalize.search.anneal`): per guidance scale, where its nominal rollout
-    and its best fell (``stood``: to the end) and the segments it added."""
-    return ", ".join(
-        f"{lv['scale']:g}: {_fell(lv['nominal_fell_at_s'])} -> {_fell(lv['fell_at_s'])} (+{lv['segments']})"
-        for lv in levels
-    )
-
-
-def _fell(s: float | None) -> str:
-    return "stood" if s is None else f"fell {s:.2f} s"
-
-
 def trace_line(row: dict, fields: tuple = TRACE) -> str:
     """The balance trace of a row (:mod:`physicalize.balance`): when it fell, when and on which support the pelvis
     drifted, the drift 0.2 s before the fall, the capture-point steps, planned vs measured foot contacts, the longest
@@ -290,12 +275,6 @@ def main() -> None:
         help="hold every object on its track by a virtual wrench at this scale (physicalize/guidance.py; 0: none): "
         "what the rollout does with the object where the reference says; a guided take is never valid",
     )
-    ap.add_argument(
-        "--anneal",
-        action="store_true",
-        help="search with the object guidance annealed to none (physicalize/search/anneal.py: levels "
-        f"{', '.join(f'{x:g}' for x in LEVELS)}, then 0; only the unguided level makes data)",
-    )
     args = ap.parse_args()
     files = clip_files(args.folders)
     t0 = time.perf_counter()
@@ -305,8 +284,7 @@ def main() -> None:
         ap.error(f"--search-budget: must be >= 0 (0: no search), got {args.search_budget:g}")
     if not args.guide >= 0:
         ap.error(f"--guide: must be >= 0 (0: no guidance), got {args.guide:g}")
-    search = replace(SEARCH, children_per_s=args.search_budget, guidance=LEVELS if args.anneal else ())
-    search = search if args.search_budget > 0 else None
+    search = replace(SEARCH, children_per_s=args.search_budget) if args.search_budget > 0 else None
     workers = search_workers(args.jobs, len(files))
     run = partial(run_clip, robot_only=args.robot_only, search=search, workers=workers, guide=args.guide)
     rows = map_ordered(run, files, jobs=args.jobs, desc="real clips")
@@ -326,8 +304,6 @@ def main() -> None:
                 f"{'':28s}searched: {s['children']} children in {s['attempts']} attempt(s), {s['cpu_s']:.1f} CPU-s "
                 f"({s['cpu_s'] / max(r['seconds'], 1e-9):.1f} per second of motion); before: {r['verdict_before']}"
             )
-            if s.get("guidance"):
-                print(f"{'':28s}levels: {level_line(s['guidance'])}")
         if args.robot_only:
             print(f"{'':28s}{trace_line(r)}")
         elif r.get("object_drift_s") is not None and not r["valid"]:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physicalize.balance import balance_figures, com_series, reference_balance_figures
+from physicalize.balance import balance_figures, reference_balance_figures, simulated_com
 from physicalize.feasibility import (
     grasp_feasibility,
     grasp_opposition,
@@ -29,7 +29,7 @@ from physicalize.object_trace import object_trace_figures
 from physicalize.payload import capped, held_objects, load_scale
 from physicalize.problem import object_qpos, tracking_problem
 from physicalize.rollout import Rollout, initial_state, replay, simulate
-from physicalize.search import anneal, beam
+from physicalize.search import beam
 from physicalize.search.beam import SearchConfig
 from physicalize.start import clean_start, prefix_frames
 from physicalize.static_torque import static_torque_figures
@@ -194,16 +194,14 @@ def _traces(scene, ref, roll: Rollout, touch_force: float, clip: RobotClip, obje
 def _search(
     scene, ref, clip, objects, state0, ref_figures, tried, gains, config: SearchConfig, workers=1, perturb=None
 ):
-    """``(gain set, rollout, figures)`` of the search (:mod:`physicalize.search.beam`; with held objects level by level
-    under annealed object guidance, :mod:`physicalize.search.anneal`) from the gain set whose rollout fell last: up to
-    ``config.attempts`` searches (seeds ``config.seed``, ``+ 1``, ...) sharing the budget
+    """``(gain set, rollout, figures)`` of the search (:mod:`physicalize.search.beam`) from the gain set whose rollout
+    fell last: up to ``config.attempts`` searches (seeds ``config.seed``, ``+ 1``, ...) sharing the budget
     (:attr:`~physicalize.search.beam.SearchConfig.children_per_s`) until one's rollout is valid, else the one that
     went wrong last (:func:`_how_far`; the earlier on a tie: a later attempt has less budget left: on
     ``sub2_woodchair_002`` at 120 the third searched three segments and stood no longer than the teacher); its
-    figures carry ``search``: where it started, its segments, its levels (``guidance``), the children and CPU-seconds
-    of every attempt, and the verdict before and after (its CPU-seconds: of the ``workers`` processes its children ran
-    in too); ``perturb``: every tracker's (a fixed object guidance, :mod:`physicalize.guidance`: a measurement, with no
-    levels). None when no tried rollout fell."""
+    figures carry ``search``: where it started, its segments, the children and CPU-seconds of every attempt, and the
+    verdict before and after (its CPU-seconds: of the ``workers`` processes its children ran in too); ``perturb``: every
+    tracker's (the object guidance, :mod:`physicalize.guidance`). None when no tried rollout fell."""
     fell = [(k, r, f) for k, r, f in tried if r.fell_at is not None]
     if not fell:
         return None
@@ -214,22 +212,22 @@ def _search(
     for attempt in range(config.attempts):
         share, left = replace(config, seed=config.seed + attempt), budget - frames
         kw = {"contact_links": clip.contact_links, "objects": objects, "max_frames": left, "workers": workers}
-        result, levels = anneal.search(scene, ref, make, *state0, nominal, share, perturb=perturb, **kw)
+        kw["perturb"] = perturb
+        result = beam.search(scene, ref, make, *state0, nominal, share, **kw)
         spent, children, frames = spent + result.cpu_s, children + result.children, frames + result.frames
         remote += result.worker_cpu_s
         now = _figures(scene, result.rollout, clip, objects, *state0, perturb, ref_figures)
         if best is None or _how_far(now) > _how_far(best[1]):
-            best = result, now, levels
+            best = result, now
         if now["valid"] or frames >= budget:
             break
-    found, figures, levels = best
+    found, figures = best
     figures.update(_traces(scene, ref, found.rollout, gains[index].touch_force, clip, objects))
     figures["search"] = {
         "gain_set": index,
         "start_s": found.start / clip.fps,
         "segments": [seg.as_dict(clip.fps) for seg in found.segments],
         "attempts": attempt + 1,
-        "guidance": [level.as_dict() for level in levels],
         "children": children,
         "frames": frames,
         "cpu_s": spent,
@@ -384,3 +382,25 @@ def _simulated_clip(clip: RobotClip, scene, roll: Rollout, method: str, provenan
         task=clip.task,
         provenance={**clip.provenance, **provenance},
     )
+
+
+def com_series(clip: RobotClip, scene, ref, zmp, roll: Rollout) -> dict:
+    """Reference, planned and simulated CoM, planned ZMP, pelvis heights and the support box: the clip's plot; and the
+    tracked reference's ``qpos`` (the dataset's ``reference.state``)."""
+    T = roll.frames
+    return {
+        "reference_qpos": clip.qpos,  # what was tracked: the retargeted clip after its start prefix, if any
+        "reference": ref.com[:T],
+        "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T],
+        "zmp_planned": None if zmp is None else zmp[:T],
+        "simulated": simulated_com(scene.model, roll.qpos),
+        "pelvis_ref": clip.qpos[:T, 2],
+        "pelvis_sim": roll.qpos[:, 2],
+        "support": _support_box(ref)[:T],
+    }
+
+
+def _support_box(ref) -> np.ndarray:
+    """(T, 2, 2) per frame the [min, max] x and y of the stance feet's sole corners (the support region's bounds)."""
+    corners = np.where(ref.stance[:, :, None, None], ref.corners[..., :2], np.nan).reshape(ref.frames, -1, 2)
+    return np.stack([np.nanmin(corners, axis=1), np.nanmax(corners, axis=1)], axis=1)

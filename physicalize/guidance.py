@@ -8,8 +8,7 @@ guidance's ``scale``), with the reference interpolated between control frames at
 (a virtual object force curriculum in GPU RL) and SPIDER (virtual contact constraints annealed to zero) anneal such
 a force to zero; here it measures (issue #54, ``make bench-physicalize-real BENCH_ARGS="--guide 1"``): on the six
 shared box slides at scale 1 every rollout kept stands to the end with its box on its track, at 3-5 N on average
-(BENCHMARKS.md). The search's guided levels use it too (:mod:`physicalize.search.anneal`: 1.0, 0.3, then none);
-only their unguided level makes data.
+(BENCHMARKS.md).
 """
 
 from __future__ import annotations

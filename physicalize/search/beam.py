@@ -73,11 +73,6 @@ class SearchConfig:
     children_per_s: float = 100.0
     seed: int = 0
     attempts: int = 3  # searches with seeds seed, seed + 1, ... until one is valid, sharing the budget
-    # with held objects: the scales of the object guidance's levels before the unguided one (physicalize.search.anneal,
-    # its LEVELS; (): none, the default: on the 20 shared takes the same verdicts, two box slides kept to their end
-    # but for a landing ankle, and make corpus 96 of 100 valid against 100), each spending this share of the budget
-    guidance: tuple[float, ...] = ()
-    guided_share: float = 0.3
 
     def __post_init__(self):
         for name in ("segment_s", "lookahead_s", "ramp_s", "children_per_s"):
@@ -86,11 +81,6 @@ class SearchConfig:
         for name in ("children", "beam", "attempts"):
             if getattr(self, name) < 1:
                 raise ValueError(f"SearchConfig.{name}: must be >= 1, got {getattr(self, name)}")
-        if self.guidance and not (all(g > 0 for g in self.guidance) and 0 < self.guided_share * len(self.guidance) < 1):
-            raise ValueError(
-                f"SearchConfig.guidance: scales > 0 whose shares ({self.guided_share} each) leave the unguided level "
-                f"some budget, got {self.guidance}"
-            )
         for name in ("com_sigma_m", "step_sigma_m", "hands_sigma_m", "press_sigma", "start_before_s"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"SearchConfig.{name}: must be >= 0, got {getattr(self, name)}")
@@ -225,14 +215,12 @@ def search(
     max_frames: int | None = None,
     workers: int = 1,
     perturb: Callable[[int, mujoco.MjData], None] | None = None,
-    segments: tuple[Segment, ...] = (),
 ) -> SearchResult | None:
     """The module docstring's search from the ``nominal`` rollout's drift onset; None when it did not fall.
     ``objects``: the objects' reference tracks ({name: (T, 7)}), whose loss the children's cost counts;
     ``max_frames``: its budget of simulated control frames (default :func:`frame_budget`); ``workers``: processes
     the children are simulated in (:mod:`physicalize.search.children`; the same result for any number);
-    ``perturb``: every tracker's (:class:`physicalize.guidance.ObjectGuidance`); ``segments``: chosen before (an
-    earlier level's, :mod:`physicalize.search.anneal`), under every child and in the result's segments."""
+    ``perturb``: every tracker's (:class:`physicalize.guidance.ObjectGuidance`, a measurement, never data)."""
     if nominal.fell_at is None:
         return None
     cpu0, fps, T = time.process_time(), ref.fps, ref.frames
@@ -244,10 +232,9 @@ def search(
     rng = np.random.default_rng(config.seed)
     sigma = np.array([config.com_sigma_m] * 2 + [config.step_sigma_m] * 2)
     held_sigma = np.array([config.hands_sigma_m] * 3 + [config.press_sigma])
-    base = GuidedReference(ref, segments, ramp)
-    tracker = Tracker(scene, base, make_controller(), qpos0, qvel0, contact_links=contact_links, perturb=perturb)
+    tracker = Tracker(scene, ref, make_controller(), qpos0, qvel0, contact_links=contact_links, perturb=perturb)
     tracker.run(start)
-    beam, children, s, next_check = [Elite(tracker.snapshot(), tuple(segments), 0.0)], 0, start, 0
+    beam, children, s, next_check = [Elite(tracker.snapshot(), (), 0.0)], 0, start, 0
     budget = frame_budget(config, T, fps) if max_frames is None else max_frames
     with Children(tracker, scorer, ramp, H, workers) as pool:
         while s < T and tracker.steps + pool.frames < budget:
