@@ -19,6 +19,8 @@ and, the same for every rollout of one reference (:func:`reference_balance_figur
   supportable by the feet it plans);
 * ``reference_foot_gap_min_m`` -- the least lateral distance between the reference's feet in the pelvis's heading
   frame (negative: the feet cross).
+
+:func:`com_series` gathers the reference, planned and simulated CoM of a rollout for the clip's plot.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import numpy as np
 from physicalize.plan import clip_to_polygon, support_polygon
 from physicalize.reference import Reference
 from physicalize.rollout import Rollout
+from pipeline.clip import RobotClip
 from pipeline.foot_contact import runs
 from pipeline.rotations import yaw_of
 
@@ -104,3 +107,25 @@ def balance_figures(model: mujoco.MjModel, ref: Reference, roll: Rollout, touch_
     measured = roll.foot_force > touch_force
     figures["support_mismatch_frac"] = float((measured != ref.stance[:T]).any(axis=1).mean()) if T else 0.0
     return figures
+
+
+def com_series(clip: RobotClip, scene, ref, zmp, roll: Rollout) -> dict:
+    """Reference, planned and simulated CoM, planned ZMP, pelvis heights and the support box: the clip's plot; and the
+    tracked reference's ``qpos`` (the dataset's ``reference.state``)."""
+    T = roll.frames
+    return {
+        "reference_qpos": clip.qpos,  # what was tracked: the retargeted clip after its start prefix, if any
+        "reference": ref.com[:T],
+        "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T],
+        "zmp_planned": None if zmp is None else zmp[:T],
+        "simulated": simulated_com(scene.model, roll.qpos),
+        "pelvis_ref": clip.qpos[:T, 2],
+        "pelvis_sim": roll.qpos[:, 2],
+        "support": _support_box(ref)[:T],
+    }
+
+
+def _support_box(ref) -> np.ndarray:
+    """(T, 2, 2) per frame the [min, max] x and y of the stance feet's sole corners (the support region's bounds)."""
+    corners = np.where(ref.stance[:, :, None, None], ref.corners[..., :2], np.nan).reshape(ref.frames, -1, 2)
+    return np.stack([np.nanmin(corners, axis=1), np.nanmax(corners, axis=1)], axis=1)

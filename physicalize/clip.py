@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physicalize.balance import balance_figures, reference_balance_figures, simulated_com
+from physicalize.balance import balance_figures, com_series, reference_balance_figures
 from physicalize.feasibility import (
     grasp_feasibility,
     grasp_opposition,
@@ -382,25 +382,3 @@ def _simulated_clip(clip: RobotClip, scene, roll: Rollout, method: str, provenan
         task=clip.task,
         provenance={**clip.provenance, **provenance},
     )
-
-
-def com_series(clip: RobotClip, scene, ref, zmp, roll: Rollout) -> dict:
-    """Reference, planned and simulated CoM, planned ZMP, pelvis heights and the support box: the clip's plot; and the
-    tracked reference's ``qpos`` (the dataset's ``reference.state``)."""
-    T = roll.frames
-    return {
-        "reference_qpos": clip.qpos,  # what was tracked: the retargeted clip after its start prefix, if any
-        "reference": ref.com[:T],
-        "planned": (ref.com if ref.com_plan is None else ref.com_plan)[:T],
-        "zmp_planned": None if zmp is None else zmp[:T],
-        "simulated": simulated_com(scene.model, roll.qpos),
-        "pelvis_ref": clip.qpos[:T, 2],
-        "pelvis_sim": roll.qpos[:, 2],
-        "support": _support_box(ref)[:T],
-    }
-
-
-def _support_box(ref) -> np.ndarray:
-    """(T, 2, 2) per frame the [min, max] x and y of the stance feet's sole corners (the support region's bounds)."""
-    corners = np.where(ref.stance[:, :, None, None], ref.corners[..., :2], np.nan).reshape(ref.frames, -1, 2)
-    return np.stack([np.nanmin(corners, axis=1), np.nanmax(corners, axis=1)], axis=1)

@@ -30,7 +30,7 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 
-from physicalize.clip import com_series
+from physicalize.balance import com_series
 from physicalize.problem import object_qpos, scene_for
 from physicalize.reference import build_reference
 from physicalize.rollout import Rollout
