@@ -269,6 +269,12 @@ def main() -> None:
         help=f"search children per second of motion where the teacher falls (0: none; {SEARCH.children_per_s:g})",
     )
     ap.add_argument(
+        "--search-seed",
+        type=int,
+        default=SEARCH.seed,
+        help=f"the search's first seed (its attempts take the next ones; {SEARCH.seed}): judge a change over several",
+    )
+    ap.add_argument(
         "--guide",
         type=float,
         default=0.0,
@@ -284,7 +290,9 @@ def main() -> None:
         ap.error(f"--search-budget: must be >= 0 (0: no search), got {args.search_budget:g}")
     if not args.guide >= 0:
         ap.error(f"--guide: must be >= 0 (0: no guidance), got {args.guide:g}")
-    search = replace(SEARCH, children_per_s=args.search_budget) if args.search_budget > 0 else None
+    search = (
+        replace(SEARCH, children_per_s=args.search_budget, seed=args.search_seed) if args.search_budget > 0 else None
+    )
     workers = search_workers(args.jobs, len(files))
     run = partial(run_clip, robot_only=args.robot_only, search=search, workers=workers, guide=args.guide)
     rows = map_ordered(run, files, jobs=args.jobs, desc="real clips")
