@@ -22,7 +22,9 @@ track this module plans, per control frame ``t`` and hand ``k``:
   the point :attr:`GraspConfig.grip_above` over the object's centre of mass: point contacts resist no
   torque about the line between them, so offset anchors make the squeezes a couple that spins the object
   and a grip axis beside the centre of mass lets it swing. The feasible reference's IK re-solves the arms
-  onto these targets (``attached``; :func:`physicalize.problem.tracking_problem`). Squeezing hands also
+  onto these targets (``attached``; :func:`physicalize.problem.tracking_problem`). A hand pushing an object along
+  its support from a face whose normal cannot give the push is moved onto one that can, and a free hand near a lone
+  push that one hand cannot give joins it (:mod:`physicalize.push_faces`). Squeezing hands also
   track their reference orientation (:attr:`GraspConfig.w_hold_rot`). Velocity and acceleration
   targets are the finite differences of ``c*``; the hand task weight is :attr:`GraspConfig.w_hold` while
   holding.
@@ -45,11 +47,10 @@ measured external generalized force ``tau_ext`` after removing the measured cont
 on that whole forearm (:data:`physicalize.wbc.GRIP_LINKS`), whose one-step-old compensation would otherwise act
 as an integrator on the squeeze: a blocked hand is pushed by the last contact force plus ``M qdd*`` more at every
 step (measured: the box was dropped; the wrist capsules, compensated, pressed 30 N on its top edge and turned
-it). Contacts of other links stay measured. Squeezing hands also track their reference orientation
-(:attr:`GraspConfig.w_hold_rot`). The schedule gives the controller the held object's reference motion
-(:class:`physicalize.object_motion.ObjectMotion`) and both frictions (:class:`physicalize.object_loop.HeldObject`).
-Holding also needs the scene's elliptic friction cones with ``impratio`` 10
-(:mod:`pipeline.scene`): with pyramidal cones and ``impratio`` 1 a squeezed box crept down 2-3 cm/s.
+it). Contacts of other links stay measured. The schedule gives the controller the held object's reference motion
+(:class:`~physicalize.object_motion.ObjectMotion`) and both frictions (:class:`~physicalize.object_loop.HeldObject`).
+Holding also needs the scene's elliptic friction cones with ``impratio`` 10 (:mod:`pipeline.scene`): with pyramidal
+cones and ``impratio`` 1 a squeezed box crept down 2-3 cm/s.
 """
 
 from __future__ import annotations
@@ -71,6 +72,7 @@ from physicalize.grasp_force import (
 from physicalize.hand_reach import HandReach, ObjectTracks, hand_offsets, hand_reach
 from physicalize.object_loop import HeldObject
 from physicalize.object_motion import ObjectMotion
+from physicalize.push_faces import PushFaces, pushed
 from physicalize.target import Target
 from pipeline.foot_contact import keep_runs, label_runs, runs, widen_runs
 from pipeline.robot import HAND_BODIES
@@ -169,9 +171,12 @@ def grasp_schedule(
     objs = ObjectTracks.of(scene, objects)
     near = hand_reach(scene, ref, objs, max(cfg.max_gap, cfg.clearance))
     holds = _holds(labels, near, objs, cfg)
+    mu = _hold_friction(m, holds, objs)
+    faces = PushFaces.of(m, objs, holds.key, holds.opposed, ref.fps, mu / cfg.safety, cfg)
+    labels = faces.recruit(near.dist, cfg.max_gap, labels)  # a free hand near a lone push it cannot give joins it
     held = holds.held
     s = np.stack([_ramp(held[:, k], cfg.ramp_frames) for k in range(2)], axis=1)
-    point, normal, gap = _on_object_tracks(m, near, holds, objs, s, cfg)
+    point, normal, gap = _on_object_tracks(m, near, holds, objs, s, cfg, faces)
     attached = point.copy()
     point += (s * (gap + cfg.depth))[..., None] * normal
     weight = cfg.w_free + s * (cfg.w_hold - cfg.w_free)
@@ -182,7 +187,6 @@ def grasp_schedule(
     dt = 1.0 / ref.fps
     vel = np.gradient(point, dt, axis=0) if T > 1 else np.zeros_like(point)
     acc = np.gradient(vel, dt, axis=0) if T > 2 else np.zeros_like(point)
-    mu = _hold_friction(m, holds, objs)
     indices = sorted(set(holds.key[held].tolist()))
     motions = {i: ObjectMotion.of(objs.pose(i)[:T], m.body_ipos[objs.bodies[i]], ref.fps) for i in indices}
     force, friction_ok = _forces(m, holds, objs, motions, (attached, normal), s, mu, ref.fps, cfg)
@@ -250,25 +254,33 @@ def _holds(labels: np.ndarray, near: HandReach, objs: ObjectTracks, cfg: GraspCo
     for k in range(2):  # one hand alone only pushes an object along the floor
         alone = np.where((key[:, k] >= 0) & (key[:, 1 - k] != key[:, k]), key[:, k], -1)
         for a, b, i in label_runs(alone):
-            if not _pushed(objs.pose(i)[a:b], cfg):
+            if not pushed(objs.pose(i)[a:b], cfg.push_travel, cfg.lift_blend):
                 key[a:b, k] = -1
     opposed &= (key >= 0).all(axis=1)
     return _Holds(key, opposed)
 
 
 def _on_object_tracks(
-    m: mujoco.MjModel, near: HandReach, holds: _Holds, objs: ObjectTracks, s: np.ndarray, cfg: GraspConfig
+    m: mujoco.MjModel,
+    near: HandReach,
+    holds: _Holds,
+    objs: ObjectTracks,
+    s: np.ndarray,
+    cfg: GraspConfig,
+    faces: PushFaces,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(point, normal, gap)`` (T, 2, 3), (T, 2, 3), (T, 2): the hand points blended by ``s`` onto their
-    anchors fixed in the held object's frame (moved with its reference pose), the inward normals (exactly
-    opposite while squeezing) and the anchor frames' surface gaps; the reference hand points elsewhere."""
+    anchors fixed in the held object's frame (moved with its reference pose; a pushing hand's moved onto the face
+    that can push, :mod:`physicalize.push_faces`), the inward normals (exactly opposite while squeezing) and the
+    anchor frames' surface gaps; the reference hand points elsewhere."""
     T = len(s)
     point, normal, gap = near.point.copy(), np.zeros((T, 2, 3)), np.zeros((T, 2))
     for k in range(2):
         for a, b, i in label_runs(holds.key[:, k]):
             pose = objs.pose(i)
             t0, c_o, n_o = _anchor(m, near, holds.opposed, objs.bodies[i], pose, k, a, b, cfg)
-            g0 = near.dist[t0, k]
+            c_o, n_o = faces(i, k, a, b, c_o, n_o)
+            g0 = near.dist[t0, k] if np.isfinite(near.dist[t0, k]) else 0.0  # a recruited hand: placed at a stand-off
             for t in range(a, b):
                 R = quat_mat(pose[t, 3:7])
                 normal[t, k] = R @ n_o
@@ -389,10 +401,3 @@ def _held_bodies(holds: _Holds, objs: ObjectTracks, T: int) -> np.ndarray:
         for a, b, i in label_runs(holds.key[:, k]):
             body[a:b, k] = objs.bodies[i]
     return body
-
-
-def _pushed(pose: np.ndarray, cfg: GraspConfig) -> bool:
-    """The object slides along its support during these frames: it moves > ``push_travel`` horizontally and is not
-    lifted."""
-    travel = float(np.linalg.norm(pose[:, :2] - pose[0, :2], axis=1).max())
-    return travel > cfg.push_travel and float(pose[:, 2].max() - pose[0, 2]) < cfg.lift_blend
