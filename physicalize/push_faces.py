@@ -16,9 +16,13 @@ object's horizontal velocity in its own frame, averaged over the hold weighted b
 * faces ``A`` and ``B`` are the two whose inward normals are closest to ``u``. Where ``A`` is within the reduced cone
   (angle to ``u`` <= ``atan(mu / safety)``) every pushing hand goes there; otherwise the two hands of a two-hand push
   take the corner between ``A`` and ``B``, the left hand on the face whose inward normal lies clockwise of ``u``
-  (``(u x n)_z < 0``: the face on a pusher's left), the right hand on the other; a hand alone takes ``A``;
+  (``(u x n)_z < 0``: the face on a pusher's left), the right hand on the other; a hand alone takes ``A`` where ``A``
+  is within the cone;
 * a hand already on a face that can push ``u`` alone, or whose target face is the far side of the object from its own
-  (inward normals more than 100 deg apart), stays where the human put it;
+  (inward normals more than 100 deg apart), stays where the human put it; so do the hands where neither a face nor a
+  corner (the two nearest faces both pushing forward, ``n . u > 0``, on either side of ``u``) can give the push (a lone
+  hand outside the best face's cone; ``sub2_largetable_004``: the table dragged towards the body, its faces across the
+  motion at 73 deg);
 * the new point is the old one projected onto the new face (clamped :data:`EDGE_MARGIN_M` inside its edges) at the old
   point's stand-off from its face; a hand alone is moved along the face onto the vertical through the centre of mass, so
   that its push does not turn the object (a point contact's push turns it unless its line passes through the centre of
@@ -185,16 +189,31 @@ def push_face(
         own /= np.linalg.norm(own)
         if np.arccos(np.clip(own @ u, -1, 1)) <= half:
             return None  # its own face pushes u within the cone
-    if np.arccos(np.clip(inward[A] @ u, -1, 1)) <= half or not partner or len(faces) < 2:
+    if np.arccos(np.clip(inward[A] @ u, -1, 1)) <= half:
         target = A
+    elif partner and (corner := _corner(inward, u, up)) is not None:
+        target = corner[hand]
     else:
-        B = order[1]
-        left_of = [np.cross(u, inward[j]) @ up < 0 for j in (A, B)]
-        target = (A, B)[left_of.index(hand == 0)] if left_of[0] != left_of[1] else A
+        return None  # neither a face nor a corner can give the push: the human's hands stay (sub2_largetable_004)
     if on_side and (inward[target] @ own > 0.98 or inward[target] @ own < FAR_SIDE_COS):
         return None
     standoff = float(np.clip(c @ -n_in - hull.support(-n_in), 0.0, 0.1)) if n_in.any() else STANDOFF_M
     return faces[target].place(c, standoff, None if partner else hull.com), inward[target]
+
+
+def _corner(inward: np.ndarray, u: np.ndarray, up: np.ndarray) -> tuple[int, int] | None:
+    """``(left, right)`` the faces (indices into the inward normals ``inward`` (F, 3)) of the corner that brackets the
+    motion ``u``: the two faces nearest it, both pushing it forward (``n . u > 0``) and on either side of it, the left
+    hand's clockwise of it (``(u x n) . up < 0``); None when no such pair exists."""
+    if len(inward) < 2:
+        return None
+    A, B = np.argsort(-(inward @ u))[:2]
+    if inward[B] @ u <= 0:
+        return None
+    left = [np.cross(u, inward[j]) @ up < 0 for j in (A, B)]
+    if left[0] == left[1]:
+        return None
+    return (int(A), int(B)) if left[0] else (int(B), int(A))
 
 
 def pushed(pose: np.ndarray, push_travel: float, lift: float) -> bool:
@@ -264,8 +283,9 @@ class PushFaces:
                 if not pushed(pose, self.push_travel, self.lift) or not np.median(dist[a:b, o]) < reach:
                     continue
                 u, up = push_direction(pose, self.fps), quat_mat(pose[0, 3:7])[2]
-                inward = np.array([-f.n for f in hull.side_faces(up)])
-                if len(inward) >= 2 and np.arccos(np.clip((inward @ u).max(), -1, 1)) > np.arctan(self.mu):
+                inward = np.array([-f.n for f in hull.side_faces(up)]).reshape(-1, 3)
+                alone = len(inward) and np.arccos(np.clip((inward @ u).max(), -1, 1)) <= np.arctan(self.mu)
+                if not alone and _corner(inward, u, up) is not None:
                     self.key[a:b, o] = i
                     labels[a:b, o] = True
         return labels

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from mocap_paths import SHARED_MOCAP, needs_shared
 
-from physicalize.push_faces import PushFaces, body_vertices, object_hull, push_direction, push_face, pushed
+from physicalize.push_faces import PushFaces, _corner, body_vertices, object_hull, push_direction, push_face, pushed
 from pipeline.rotations import quat_mat
 
 HALF = np.array([0.2, 0.15, 0.18])
@@ -82,6 +82,20 @@ def test_a_hand_that_can_push_or_would_reach_across_stays():
     # the object moves towards the hand: the face that could push it is on the far side
     assert push_face(hull, up, c, n_in, np.array([-1.0, 0, 0]), 0, False, MU) is None
     assert push_face(hull, up, c, n_in, np.zeros(3), 0, False, MU) is None
+
+
+def test_hands_stay_where_no_face_nor_corner_can_push():
+    """A lone hand whose best face is 45 deg off the motion, and a pair whose two nearest faces do not both push the
+    motion forward (a table dragged towards the body across its faces: sub2_largetable_004), keep the human's
+    placement."""
+    _, hull = _box_hull()
+    up = np.array([0.0, 0, 1])
+    c = np.array([-HALF[0] - 0.02, 0.0, 0.05])
+    assert push_face(hull, up, c, np.array([1.0, 0, 0]), _unit([1, 1, 0]), 0, False, MU) is None
+    across = np.array([[0.0, 1, 0], [0.0, -1, 0]])
+    assert _corner(across, _unit([0.96, 0.29, 0]), up) is None
+    left, right = _corner(np.array([[1.0, 0, 0], [0.0, 1, 0], [-1.0, 0, 0]]), _unit([1, 0.9, 0]), up)
+    assert (left, right) == (0, 1)  # +x is clockwise of the motion: the left hand's face
 
 
 def test_a_hand_on_the_lid_moves_onto_a_side_face():
