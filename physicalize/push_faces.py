@@ -17,12 +17,12 @@ object's horizontal velocity in its own frame, averaged over the hold weighted b
   (angle to ``u`` <= ``atan(mu / safety)``) every pushing hand goes there; otherwise the two hands of a two-hand push
   take the corner between ``A`` and ``B``, the left hand on the face whose inward normal lies clockwise of ``u``
   (``(u x n)_z < 0``: the face on a pusher's left), the right hand on the other; a hand alone takes ``A`` where ``A``
-  is within the cone;
+  pushes the motion forward (``sub8_plasticbox_000``: 64 -> 26 deg off the motion, valid; kept at 64 deg the box is
+  lost);
 * a hand already on a face that can push ``u`` alone, or whose target face is the far side of the object from its own
   (inward normals more than 100 deg apart), stays where the human put it; so do the hands where neither a face nor a
-  corner (the two nearest faces both pushing forward, ``n . u > 0``, on either side of ``u``) can give the push (a lone
-  hand outside the best face's cone; ``sub2_largetable_004``: the table dragged towards the body, its faces across the
-  motion at 73 deg);
+  corner (the two nearest faces both pushing forward, ``n . u > 0``, on either side of ``u``) can give a pair's push
+  (``sub2_largetable_004``: the table dragged towards the body, its faces across the motion at 73 deg);
 * the new point is the old one projected onto the new face (clamped :data:`EDGE_MARGIN_M` inside its edges) at the old
   point's stand-off from its face; a hand alone is moved along the face onto the vertical through the centre of mass, so
   that its push does not turn the object (a point contact's push turns it unless its line passes through the centre of
@@ -189,7 +189,7 @@ def push_face(
         own /= np.linalg.norm(own)
         if np.arccos(np.clip(own @ u, -1, 1)) <= half:
             return None  # its own face pushes u within the cone
-    if np.arccos(np.clip(inward[A] @ u, -1, 1)) <= half:
+    if np.arccos(np.clip(inward[A] @ u, -1, 1)) <= half or (not partner and inward[A] @ u > 0):
         target = A
     elif partner and (corner := _corner(inward, u, up)) is not None:
         target = corner[hand]

@@ -85,13 +85,9 @@ def test_a_hand_that_can_push_or_would_reach_across_stays():
 
 
 def test_hands_stay_where_no_face_nor_corner_can_push():
-    """A lone hand whose best face is 45 deg off the motion, and a pair whose two nearest faces do not both push the
-    motion forward (a table dragged towards the body across its faces: sub2_largetable_004), keep the human's
-    placement."""
-    _, hull = _box_hull()
+    """A pair whose two nearest faces do not both push the motion forward (a table dragged towards the body across its
+    faces: sub2_largetable_004) keeps the human's placement."""
     up = np.array([0.0, 0, 1])
-    c = np.array([-HALF[0] - 0.02, 0.0, 0.05])
-    assert push_face(hull, up, c, np.array([1.0, 0, 0]), _unit([1, 1, 0]), 0, False, MU) is None
     across = np.array([[0.0, 1, 0], [0.0, -1, 0]])
     assert _corner(across, _unit([0.96, 0.29, 0]), up) is None
     left, right = _corner(np.array([[1.0, 0, 0], [0.0, 1, 0], [-1.0, 0, 0]]), _unit([1, 0.9, 0]), up)
