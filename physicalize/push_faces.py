@@ -43,7 +43,7 @@ import trimesh
 from physicalize.grasp_config import GraspConfig
 from physicalize.hand_reach import ObjectTracks
 from pipeline.foot_contact import label_runs
-from pipeline.rotations import quat_mat
+from pipeline.rotations import pose_rotations, quat_mat
 
 FACE_ANGLE_DEG = 25.0  # hull triangles whose horizontal normals are this close form one face
 MIN_FACE_SHARE = 0.25  # a face has at least this share of the largest face's area
@@ -164,7 +164,7 @@ def push_direction(pose: np.ndarray, fps: float) -> np.ndarray:
     not move."""
     v = np.gradient(pose[:, :3], 1.0 / fps, axis=0) if len(pose) > 1 else np.zeros((1, 3))
     v[:, 2] = 0.0
-    u = np.einsum("tji,tj->i", np.stack([quat_mat(q) for q in pose[:, 3:7]]), v)
+    u = np.einsum("tji,tj->i", pose_rotations(pose), v)
     norm = np.linalg.norm(u)
     return u / norm if norm > 1e-9 else np.zeros(3)
 
@@ -181,8 +181,7 @@ def push_face(
         return None
     half = np.arctan(mu)
     inward = np.array([-f.n for f in faces])
-    order = np.argsort(-(inward @ u))
-    A = order[0]
+    A = int(np.argmax(inward @ u))
     own = n_in - (n_in @ up) * up
     on_side = abs(n_in @ up) < 0.7 and np.linalg.norm(own) > 1e-6  # a recruited hand has no face of its own
     if on_side:
